@@ -1,0 +1,84 @@
+"""Simulation state and step input: everything that changes during a run."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from solver import quat
+from solver.model import Model
+
+
+@dataclass(frozen=True)
+class State:
+    """The state at one instant.  ``step()`` returns a new one; a keyframe is a kept State.
+
+    time: s.  step: number of steps taken.
+    body_pos (nb,3) m, centre of mass; body_quat (nb,4) (w,x,y,z) body → world;
+    body_vel (nb,3) m/s; body_omega (nb,3) rad/s, world frame.
+    joint_q_sf (nj,3) rad: elastic (Voigt) part of each joint's deflection, per
+        parent-frame axis; in the elastic (unyielded) phase it equals the
+        deflection from ``joint_anchor``.
+    joint_yielded (nj,) bool: the joint is flowing (three-element rows).
+    joint_anchor (nj,4): rest orientation (parent frame) the elastic phase springs
+        back to; re-anchored at every un-yield.
+    joint_torque_avg (nj,) N·m: low-passed norm of the rheology torque (yield test).
+    joint_torque (nj,3) N·m: rheology row forces λ_s of the last step.
+    warm_key (n,) int64 sorted, warm_lam (n,): row forces of the last step by row key.
+    """
+
+    time: float
+    step: int
+    body_pos: np.ndarray
+    body_quat: np.ndarray
+    body_vel: np.ndarray
+    body_omega: np.ndarray
+    joint_q_sf: np.ndarray
+    joint_yielded: np.ndarray
+    joint_anchor: np.ndarray
+    joint_torque_avg: np.ndarray
+    joint_torque: np.ndarray
+    warm_key: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    warm_lam: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+
+@dataclass(frozen=True)
+class StepInput:
+    """External input for one step, constant over the step.
+
+    body_force (nb,3) N and body_torque (nb,3) N·m, world frame, about each
+    body's centre of mass.  ``None`` = no external load.
+    """
+
+    body_force: np.ndarray | None = None
+    body_torque: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class StepReport:
+    """What one step did, for traces and benchmarks."""
+
+    rows: int
+    contacts: int
+    iterations: int
+    residual: float
+    solver: str
+
+
+def initial_state(model: Model) -> State:
+    """The rest pose, at rest."""
+    nb, nj = model.nbody, model.njoint
+    return State(
+        time=0.0,
+        step=0,
+        body_pos=model.body_pos0.copy(),
+        body_quat=model.body_quat0.copy(),
+        body_vel=np.zeros((nb, 3)),
+        body_omega=np.zeros((nb, 3)),
+        joint_q_sf=np.zeros((nj, 3)),
+        joint_yielded=np.zeros(nj, dtype=bool),
+        joint_anchor=np.tile(quat.IDENTITY, (nj, 1)),
+        joint_torque_avg=np.zeros(nj),
+        joint_torque=np.zeros((nj, 3)),
+    )

@@ -1,0 +1,170 @@
+"""One simulation step (DESIGN §3, digest §4.3):
+
+    frames   = kinematics(model, state)
+    contacts = collide(...)                      only when the scene has collision pairs
+    rows     = anchor | rheology | limits | contacts   (rheology only for joints that have it)
+    lam      = solve(rows, v_free, warm start)   direct when equality-only, else PGS
+    v, pose  = integrate(...)
+    q_sf     = rheology_update(rows, v)          with the SOLVED velocity w_s[t+1]
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from solver import quat
+from solver import collide
+from solver.compliance import three_element_update
+from solver.contact_rows import contact_rows
+from solver.direct import direct_solve
+from solver.errors import SimulationError
+from solver.integrate import free_velocity, integrate_pose
+from solver.joints import anchor_rows, elastic_deflection, flowing, joint_frames, limit_rows, rheology_rows
+from solver.model import Model
+from solver.monitor import check_state
+from solver.observe import relative_rotations
+from solver.pgs import pgs_solve
+from solver.reference import reference_solve
+from solver.response import dense_system, row_response, world_inverse_inertia
+from solver.rows import KIND_RHEOLOGY, Rows, concat
+from solver.stabilize import project_joints
+from solver.state import State, StepInput, StepReport
+
+
+def build_rows(model: Model, state: State, body_rot: np.ndarray, vel_free: np.ndarray) -> tuple[Rows, int, np.ndarray]:
+    """The step's row table, its contact count, and the joint of each rheology row."""
+    h = model.options.h
+    fr = joint_frames(model, state.body_pos, state.body_quat, body_rot)
+    blocks = [anchor_rows(model, fr, h, vel_free[:, 3:])]
+    rheo_joint = np.zeros(0, dtype=np.int64)
+    if model.joint_rheology.any():
+        block, rheo_joint = rheology_rows(model, state, fr, h)
+        blocks.append(block)
+    if model.has_limits:
+        blocks.append(limit_rows(model, fr, h))
+    ncontact = 0
+    if model.has_collision:
+        con = collide.collide(model.geometry, state.body_pos, state.body_quat, model.options.contact_margin)
+        ncontact = len(con.key)
+        if ncontact:
+            blocks.append(contact_rows(model, con, state.body_pos, vel_free))
+    return concat(blocks), ncontact, rheo_joint
+
+
+def warm_start(model: Model, state: State, rows: Rows) -> np.ndarray:
+    """Last step's forces for rows with the same key, scaled by the warm-start factor."""
+    opt = model.options
+    lam = np.zeros(len(rows))
+    if not opt.warm_start or len(state.warm_key) == 0:
+        return lam
+    at = np.searchsorted(state.warm_key, rows.key)
+    at = np.minimum(at, len(state.warm_key) - 1)
+    hit = state.warm_key[at] == rows.key
+    lam[hit] = opt.warm_start_factor * state.warm_lam[at[hit]]
+    return lam
+
+
+def solve(model: Model, state: State, rows: Rows, resp: tuple, vel_free: np.ndarray) -> tuple:
+    """(λ, velocities, iterations, residual, solver name) for the step's rows."""
+    opt = model.options
+    method = opt.method
+    if method == "auto":
+        method = "direct" if rows.equality_only else "pgs"
+    if method == "direct":
+        if not rows.equality_only:
+            raise ValueError("the direct solver handles equality rows only; use 'auto'")
+        lam, residual = direct_solve(rows, resp, vel_free)
+        return lam, _apply(rows, resp, vel_free, lam), 1, residual, "direct"
+    if method == "reference":
+        q, c = dense_system(rows, resp, vel_free)
+        lam = reference_solve(q, c, rows.lo, rows.hi, rows.fric_of, rows.mu)
+        return lam, _apply(rows, resp, vel_free, lam), 1, 0.0, "reference"
+    lam, vel, sweeps, residual = pgs_solve(
+        rows.body_a, rows.body_b, rows.jac_a, rows.jac_b, resp[0], resp[1], rows.lo, rows.hi,
+        rows.comp, rows.bias, rows.fric_of, rows.mu, vel_free, warm_start(model, state, rows),
+        opt.iterations, 1e-12,
+    )  # fmt: skip
+    return lam, vel, sweeps, residual, "pgs"
+
+
+def _apply(rows: Rows, resp: tuple, vel_free: np.ndarray, lam: np.ndarray) -> np.ndarray:
+    """vel_free plus the velocity response to the row forces."""
+    vel = np.vstack((vel_free, np.zeros((1, 6))))
+    np.add.at(vel, rows.body_a, resp[0] * lam[:, None])
+    np.add.at(vel, rows.body_b, resp[1] * lam[:, None])
+    return vel[:-1]
+
+
+def step(model: Model, state: State, inp: StepInput | None = None) -> tuple[State, StepReport]:
+    """Advance one step of size model.options.h."""
+    inp = inp or StepInput()
+    h = model.options.h
+    body_rot = quat.matrix(state.body_quat)
+    inv_i = world_inverse_inertia(model.body_inv_inertia, body_rot)
+    vel_free = free_velocity(model, state, inp, inv_i)
+    rows, ncontact, rheo_joint = build_rows(model, state, body_rot, vel_free)
+    resp = row_response(rows, model.body_inv_mass, inv_i, h)
+    try:
+        lam, vel, iters, residual, used = solve(model, state, rows, resp, vel_free)
+    except ValueError as exc:
+        raise SimulationError(str(exc), state.step, state.time, None) from None
+    check_state(model, state.step, state.time, state.body_pos, state.body_quat, vel)
+    pos, q, omega = integrate_pose(model, state, vel, body_rot)
+    pos, q = project_joints(model, pos, q)
+    check_state(model, state.step, state.time, pos, q, np.concatenate((vel[:, :3], omega), 1))
+    rheo = _rheology_update(model, state, rows, vel, lam, rheo_joint, q)
+    order = np.argsort(rows.key, kind="stable")
+    new = replace(
+        state,
+        time=state.time + h,
+        step=state.step + 1,
+        body_pos=pos,
+        body_quat=q,
+        body_vel=vel[:, :3].copy(),
+        body_omega=omega,
+        warm_key=rows.key[order],
+        warm_lam=lam[order],
+        **rheo,
+    )
+    return new, StepReport(len(rows), ncontact, iters, float(residual), used)
+
+
+def _rheology_update(
+    model: Model, state: State, rows: Rows, vel: np.ndarray, lam: np.ndarray,
+    rheo_joint: np.ndarray, body_quat: np.ndarray,
+) -> dict:  # fmt: skip
+    """q_sf, yield flags, anchors and torques after the solve (digest §4.4, yield §2.6)."""
+    h = model.options.h
+    nj = model.njoint
+    sel = rows.kind == KIND_RHEOLOGY
+    torque = np.zeros((nj, 3))
+    w = np.zeros((nj, 3))
+    if sel.any():
+        vel_ext = np.vstack((vel, np.zeros((1, 6))))
+        w_rows = np.einsum("ni,ni->n", rows.jac_a[sel], vel_ext[rows.body_a[sel]]) + np.einsum(
+            "ni,ni->n", rows.jac_b[sel], vel_ext[rows.body_b[sel]]
+        )
+        j = rheo_joint[::3]
+        torque[j] = lam[sel].reshape(-1, 3)
+        w[j] = w_rows.reshape(-1, 3)
+    alpha = h / (model.options.yield_filter_time + h)
+    avg = state.joint_torque_avg + alpha * (np.linalg.norm(torque, axis=1) - state.joint_torque_avg)
+    flow = flowing(model, state.joint_yielded) & model.joint_rheology
+    q_sf = state.joint_q_sf.copy()
+    if flow.any():
+        dd = model.joint_dd[flow]
+        q_sf[flow] = three_element_update(model.joint_kf[flow], model.joint_df[flow], dd, q_sf[flow], w[flow], h)
+    can_yield = np.isfinite(model.joint_yield) & np.all(np.isfinite(model.joint_dd), axis=1)
+    yielded = state.joint_yielded.copy()
+    q_rel = relative_rotations(model, body_quat)
+    anchor = state.joint_anchor.copy()
+    unyield = can_yield & yielded & (avg < model.joint_yield)
+    anchor[unyield] = quat.mul(quat.exp(-q_sf[unyield]), q_rel[unyield])
+    yielded = np.where(can_yield, np.where(yielded, ~unyield, avg > model.joint_yield), False)
+    elastic = ~flowing(model, yielded) & model.joint_rheology
+    q_sf[elastic] = elastic_deflection(q_rel[elastic], anchor[elastic])
+    return dict(
+        joint_q_sf=q_sf, joint_yielded=yielded, joint_anchor=anchor, joint_torque_avg=avg, joint_torque=torque
+    )

@@ -1,0 +1,107 @@
+"""The paper's experiment (digest §5.1, rotational form) against independent values."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import scipy.linalg
+from rigbuild import one_bone
+
+from solver.model import build_model
+from solver.observe import joint_rotations
+from solver.state import StepInput, initial_state
+from solver.step import step
+
+KF, DF, DD, INERTIA, TAU = 1.0, 10.0, 100.0, 0.1, 1.0
+T_LOAD, T_END = 2.0, 6.0
+
+
+def simulate(h: float) -> np.ndarray:
+    """Joint angle about z after every step, through the solver."""
+    model = build_model(one_bone(h, KF, DF, DD, INERTIA))
+    state = initial_state(model)
+    loaded = StepInput(body_torque=np.array([[0.0, 0.0, TAU]]))
+    angles = []
+    for k in range(round(T_END / h)):
+        state, _ = step(model, state, loaded if k < round(T_LOAD / h) else None)
+        angles.append(joint_rotations(model, state)[0, 2])
+    return np.array(angles)
+
+
+def recursion(h: float) -> np.ndarray:
+    """The exact discrete recursion of the digest, written out for one axis."""
+    s = KF * h + DF
+    c = (DD + DF + KF * h) / (DD * s)
+    d = KF / s
+    dq = (DD + DF) / (DD + DF + KF * h)
+    dw = DD * h / (DD + DF + KF * h)
+    theta = omega = q = 0.0
+    out = []
+    for k in range(round(T_END / h)):
+        tau = TAU if k < round(T_LOAD / h) else 0.0
+        omega_free = omega + h * tau / INERTIA
+        lam = -(omega_free + d * q) / (h / INERTIA + c)
+        omega = omega_free + h / INERTIA * lam
+        q = dq * q + dw * omega
+        theta += h * omega
+        out.append(theta)
+    return np.array(out)
+
+
+def continuous(times: np.ndarray) -> np.ndarray:
+    """Exact solution of the continuous model (θ, ω, q_sf) by the matrix exponential.
+
+    I ω̇ = τ + λ, λ = −D_d (ω − q̇_sf) = −K_f q_sf − D_f q̇_sf
+    ⇒ q̇_sf = (D_d ω − K_f q_sf)/(D_d + D_f).
+    """
+    s = DD + DF
+    a = np.array(
+        [
+            [0.0, 1.0, 0.0],
+            [0.0, -DD / INERTIA * (1 - DD / s), -DD * KF / (s * INERTIA)],
+            [0.0, DD / s, -KF / s],
+        ]
+    )
+
+    def advance(x, tau, dt):
+        aug = np.zeros((4, 4))
+        aug[:3, :3] = a
+        aug[1, 3] = tau / INERTIA
+        return (scipy.linalg.expm(aug * dt) @ np.append(x, 1.0))[:3]
+
+    x_load = advance(np.zeros(3), TAU, T_LOAD)
+    return np.array(
+        [
+            advance(np.zeros(3), TAU, t)[0] if t <= T_LOAD else advance(x_load, 0.0, t - T_LOAD)[0]
+            for t in times
+        ]
+    )
+
+
+@pytest.mark.parametrize("h", [0.02, 0.005])
+def test_solver_equals_exact_discrete_recursion(h):
+    assert np.max(np.abs(simulate(h) - recursion(h))) < 1e-9
+
+
+def test_first_order_convergence_to_continuous_solution():
+    errors = []
+    for h in (0.02, 0.01, 0.005, 0.0025):
+        angles = simulate(h)
+        times = h * np.arange(1, len(angles) + 1)
+        errors.append(np.max(np.abs(angles - continuous(times))))
+    ratios = np.array(errors[:-1]) / np.array(errors[1:])
+    # Semi-implicit Euler is first order: the ratio tends to 2 from below as h → 0.
+    assert np.all((ratios > 1.7) & (ratios < 2.1)), (errors, ratios)
+    assert np.all(np.diff(ratios) > 0.0) and ratios[-1] > 1.85, ratios
+
+
+def test_unloading_recovers_partly_and_keeps_a_residual():
+    h = 0.02
+    angles = simulate(h)
+    at_unload = angles[round(T_LOAD / h) - 1]
+    final = angles[-1]
+    permanent = TAU * T_LOAD / DD  # continuous permanent set τ·t1/D_d
+    assert final < 0.8 * at_unload  # it came back...
+    assert final > permanent  # ...but not all the way (the Voigt part is still recovering)
+    # After a very long time only the dashpot's share remains: continuous model limit.
+    assert abs(continuous(np.array([400.0]))[0] - permanent) < 1e-6
