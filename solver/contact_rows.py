@@ -17,6 +17,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from solver import quat
 from solver.collide import Contacts
 from solver.model import Model
 from solver.rows import KIND_CONTACT, KIND_FRICTION, Rows, concat, make_rows, point_jacobians
@@ -25,7 +26,7 @@ from solver.rows import KIND_CONTACT, KIND_FRICTION, Rows, concat, make_rows, po
 def _point_velocity(vel: np.ndarray, body: np.ndarray, r: np.ndarray) -> np.ndarray:
     """Velocity of world points rigidly attached to bodies (static = 0)."""
     v = np.vstack((vel, np.zeros((1, 6))))[body]
-    return v[:, :3] + np.cross(v[:, 3:], r)
+    return v[:, :3] + quat.cross(v[:, 3:], r)
 
 
 def tangent_basis(normal: np.ndarray, slip: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -33,10 +34,10 @@ def tangent_basis(normal: np.ndarray, slip: np.ndarray) -> tuple[np.ndarray, np.
     t = slip - np.einsum("ni,ni->n", slip, normal)[:, None] * normal
     norm = np.linalg.norm(t, axis=1)
     ref = np.where(np.abs(normal[:, :1]) < 0.9, [[1.0, 0.0, 0.0]], [[0.0, 0.0, 1.0]])
-    fixed = np.cross(normal, ref)
+    fixed = quat.cross(normal, ref)
     fixed /= np.linalg.norm(fixed, axis=1, keepdims=True)
     t1 = np.where((norm > 1e-9)[:, None], t / np.maximum(norm, 1e-300)[:, None], fixed)
-    return t1, np.cross(normal, t1)
+    return t1, quat.cross(normal, t1)
 
 
 def contact_rows(model: Model, con: Contacts, body_pos: np.ndarray, vel_free: np.ndarray) -> Rows:
@@ -50,7 +51,9 @@ def contact_rows(model: Model, con: Contacts, body_pos: np.ndarray, vel_free: np
     jac_a, jac_b = point_jacobians(con.normal, r_a, r_b)
     d = con.depth
     bias = np.where(d < 0.0, -d / h, -opt.contact_erp * np.maximum(d - opt.contact_slop, 0.0) / h)
-    normal = make_rows(KIND_CONTACT, con.key, con.body_a, con.body_b, jac_a, jac_b, lo=0.0, bias=bias)
+    normal = make_rows(
+        KIND_CONTACT, con.key, con.body_a, con.body_b, jac_a, jac_b, lo=0.0, bias=bias
+    )
     slip = _point_velocity(vel_free, con.body_b, r_b) - _point_velocity(vel_free, con.body_a, r_a)
     t1, t2 = tangent_basis(con.normal, slip)
     axes = np.stack((t1, t2), axis=1).reshape(-1, 3)

@@ -21,7 +21,9 @@ from solver.model import Model
 from solver.state import State, StepInput
 
 
-def free_velocity(model: Model, state: State, inp: StepInput, inv_inertia_world: np.ndarray) -> np.ndarray:
+def free_velocity(
+    model: Model, state: State, inp: StepInput, inv_inertia_world: np.ndarray
+) -> np.ndarray:
     """(nb,6) velocities after external forces and gravity, before constraints."""
     h = model.options.h
     movable = model.body_inv_mass > 0.0

@@ -64,7 +64,9 @@ class JointFrames:
     com_child: np.ndarray
 
 
-def joint_frames(model: Model, body_pos: np.ndarray, body_quat: np.ndarray, body_rot: np.ndarray) -> JointFrames:
+def joint_frames(
+    model: Model, body_pos: np.ndarray, body_quat: np.ndarray, body_rot: np.ndarray
+) -> JointFrames:
     """Joint frames; index -1 (the world) reads the identity pose appended at the end."""
     pos = np.vstack((body_pos, np.zeros((1, 3))))
     qs = np.vstack((body_quat, quat.IDENTITY))
@@ -79,7 +81,7 @@ def joint_frames(model: Model, body_pos: np.ndarray, body_quat: np.ndarray, body
 
 def arc_offset(omega: np.ndarray, r: np.ndarray, h: float) -> np.ndarray:
     """N = exp(hω) r − r − h ω × r: the part of an anchor's motion a linear row misses."""
-    return quat.rotate(quat.exp(h * omega), r) - r - h * np.cross(omega, r)
+    return quat.rotate(quat.exp(h * omega), r) - r - h * quat.cross(omega, r)
 
 
 def anchor_rows(model: Model, fr: JointFrames, h: float, omega: np.ndarray | None = None) -> Rows:
@@ -163,7 +165,7 @@ def _limit_candidates(model: Model, fr: JointFrames) -> tuple[list, list, list, 
     margin = model.options.limit_margin
     out = ([], [], [], [])
     for j in np.flatnonzero(swing_c < margin):
-        n = np.cross(d[j], d_now[j])
+        n = quat.cross(d[j], d_now[j])
         norm = np.linalg.norm(n)
         n = n / norm if norm > 1e-9 else _perpendicular(d[j])
         _append(out, j, 0, -(fr.rot_parent[j] @ n), swing_c[j])
@@ -175,14 +177,14 @@ def _limit_candidates(model: Model, fr: JointFrames) -> tuple[list, list, list, 
 
 
 def _append(out: tuple, j: int, slot: int, axis: np.ndarray, c: float) -> None:
-    for lst, value in zip(out, (j, slot, axis, c)):
+    for lst, value in zip(out, (j, slot, axis, c), strict=True):
         lst.append(value)
 
 
 def _perpendicular(d: np.ndarray) -> np.ndarray:
-    n = np.cross(d, [1.0, 0.0, 0.0])
+    n = quat.cross(d, [1.0, 0.0, 0.0])
     if np.linalg.norm(n) < 1e-6:
-        n = np.cross(d, [0.0, 0.0, 1.0])
+        n = quat.cross(d, [0.0, 0.0, 1.0])
     return n / np.linalg.norm(n)
 
 

@@ -300,8 +300,17 @@ def _geometry(
     for i, b in enumerate(spec.bones):
         if b.collide:
             length = float(np.linalg.norm(b.tail - b.head))
-            centre_w = 0.5 * (b.head + b.tail) if b.shape.kind != "sphere" or b.com is None else b.com
-            add(i, b.shape, centre_w - pos0[i], shape_frame(b.head, b.tail), length, spec.bone_friction)
+            centre_w = (
+                0.5 * (b.head + b.tail) if b.shape.kind != "sphere" or b.com is None else b.com
+            )
+            add(
+                i,
+                b.shape,
+                centre_w - pos0[i],
+                shape_frame(b.head, b.tail),
+                length,
+                spec.bone_friction,
+            )
     k = nbone
     for p in spec.props:
         q = quat.normalize(np.asarray(p.rotation, dtype=float))
@@ -309,7 +318,14 @@ def _geometry(
             add(k, p.shape, np.zeros(3), quat.IDENTITY, 2.0 * p.shape.half_extents[1], p.friction)
             k += 1
         else:
-            add(-1, p.shape, np.asarray(p.position, dtype=float), q, 2.0 * p.shape.half_extents[1], p.friction)
+            add(
+                -1,
+                p.shape,
+                np.asarray(p.position, dtype=float),
+                q,
+                2.0 * p.shape.half_extents[1],
+                p.friction,
+            )
     arrays = dict(
         shape_body=np.array(body, dtype=np.int64),
         shape_kind=np.array(kind, dtype=np.int64),
@@ -323,7 +339,8 @@ def _geometry(
     if len(body) < 2:
         pair_a = pair_b = np.zeros(0, dtype=np.int64)
     else:
+        shapes = {k: v for k, v in arrays.items() if k != "shape_friction"}
         pair_a, pair_b = collide.candidate_pairs(
-            **arrays, body_parent=body_parent, body_pos=pos0, body_quat=quat0
+            **shapes, body_parent=body_parent, body_pos=pos0, body_quat=quat0
         )
     return collide.Geometry(**arrays, pair_a=pair_a, pair_b=pair_b)

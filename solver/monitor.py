@@ -18,7 +18,9 @@ def check_state(
     finite = np.isfinite(pos).all(1) & np.isfinite(q).all(1) & np.isfinite(vel).all(1)
     if not finite.all():
         body = int(np.flatnonzero(~finite)[0])
-        raise SimulationError("state became non-finite (NaN or infinity)", step, time, model.body_names[body])
+        raise SimulationError(
+            "state became non-finite (NaN or infinity)", step, time, model.body_names[body]
+        )
     speed = np.linalg.norm(vel[:, :3], axis=1)
     spin = np.linalg.norm(vel[:, 3:], axis=1)
     excess = np.maximum(speed / opt.max_speed, spin / opt.max_angular_speed)
@@ -36,7 +38,8 @@ def check_state(
         j = int(np.argmax(gaps))
         if gaps[j] > opt.max_joint_gap:
             raise SimulationError(
-                f"joint pulled apart: anchors {gaps[j]:.3g} m apart (limit {opt.max_joint_gap:g} m)",
+                f"joint pulled apart: anchors {gaps[j]:.3g} m apart "
+                f"(limit {opt.max_joint_gap:g} m)",
                 step,
                 time,
                 model.joint_names[j],

@@ -55,7 +55,9 @@ def reference_solve(
         bound = mu[fr] * np.maximum(lam[fric_of[fr]], 0.0)
         lo[fr], hi[fr] = -bound, bound
         new = _box_qp(q, c, lo, hi)
-        done = np.max(np.abs(new - lam), initial=0.0) <= tol * max(1.0, np.max(np.abs(new), initial=0.0))
+        done = np.max(np.abs(new - lam), initial=0.0) <= tol * max(
+            1.0, np.max(np.abs(new), initial=0.0)
+        )
         lam = new
         if done or len(fr) == 0:
             break

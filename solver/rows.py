@@ -22,6 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from solver import quat
+
 KIND_JOINT, KIND_RHEOLOGY, KIND_LIMIT, KIND_CONTACT, KIND_FRICTION, KIND_GRIP = range(6)
 # Key layout: kind in the top bits, then up to 2**40 per-kind identities.
 KEY_SHIFT = 40
@@ -94,9 +96,13 @@ def concat(blocks: list[Rows]) -> Rows:
     """Stack row blocks in order; friction indices are shifted to the new positions."""
     blocks = [b for b in blocks if len(b) > 0]
     if not blocks:
-        return make_rows(0, np.zeros(0), np.zeros(0), np.zeros(0), np.zeros((0, 6)), np.zeros((0, 6)))
+        return make_rows(
+            0, np.zeros(0), np.zeros(0), np.zeros(0), np.zeros((0, 6)), np.zeros((0, 6))
+        )
     offsets = np.cumsum([0] + [len(b) for b in blocks[:-1]])
-    fric = [np.where(b.fric_of >= 0, b.fric_of + o, -1) for b, o in zip(blocks, offsets)]
+    fric = [
+        np.where(b.fric_of >= 0, b.fric_of + o, -1) for b, o in zip(blocks, offsets, strict=True)
+    ]
     fields = {
         name: np.concatenate([getattr(b, name) for b in blocks])
         for name in Rows.__dataclass_fields__
@@ -122,6 +128,6 @@ def point_jacobians(
     w = axis·(v_b + ω_b × r_b − v_a − ω_a × r_a), with r the point relative to each
     body's centre of mass (world); e·(ω × r) = ω·(r × e).
     """
-    jac_b = np.concatenate((axes, np.cross(r_b, axes)), axis=1)
-    jac_a = -np.concatenate((axes, np.cross(r_a, axes)), axis=1)
+    jac_b = np.concatenate((axes, quat.cross(r_b, axes)), axis=1)
+    jac_a = -np.concatenate((axes, quat.cross(r_a, axes)), axis=1)
     return jac_a, jac_b

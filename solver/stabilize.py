@@ -40,7 +40,9 @@ def project_joints(
         rot = quat.matrix(q)
         fr = joint_frames(model, pos, q, rot)
         rows = anchor_rows(model.with_options(joint_erp=1.0), fr, 1.0)
-        resp = row_response(rows, model.body_inv_mass, world_inverse_inertia(model.body_inv_inertia, rot), 1.0)
+        resp = row_response(
+            rows, model.body_inv_mass, world_inverse_inertia(model.body_inv_inertia, rot), 1.0
+        )
         a, _ = dense_matrix(rows, resp, nb)
         gap = (fr.anchor_child - fr.anchor_parent).reshape(-1)
         mu = scipy.linalg.cho_solve(scipy.linalg.cho_factor(a + 1e-14 * np.eye(len(a))), -gap)

@@ -1,11 +1,11 @@
 """One simulation step (DESIGN §3, digest §4.3):
 
-    frames   = kinematics(model, state)
-    contacts = collide(...)                      only when the scene has collision pairs
-    rows     = anchor | rheology | limits | contacts   (rheology only for joints that have it)
-    lam      = solve(rows, v_free, warm start)   direct when equality-only, else PGS
-    v, pose  = integrate(...)
-    q_sf     = rheology_update(rows, v)          with the SOLVED velocity w_s[t+1]
+frames   = kinematics(model, state)
+contacts = collide(...)                      only when the scene has collision pairs
+rows     = anchor | rheology | limits | contacts   (rheology only for joints that have it)
+lam      = solve(rows, v_free, warm start)   direct when equality-only, else PGS
+v, pose  = integrate(...)
+q_sf     = rheology_update(rows, v)          with the SOLVED velocity w_s[t+1]
 """
 
 from __future__ import annotations
@@ -14,14 +14,20 @@ from dataclasses import replace
 
 import numpy as np
 
-from solver import quat
-from solver import collide
+from solver import collide, quat
 from solver.compliance import three_element_update
 from solver.contact_rows import contact_rows
 from solver.direct import direct_solve
 from solver.errors import SimulationError
 from solver.integrate import free_velocity, integrate_pose
-from solver.joints import anchor_rows, elastic_deflection, flowing, joint_frames, limit_rows, rheology_rows
+from solver.joints import (
+    anchor_rows,
+    elastic_deflection,
+    flowing,
+    joint_frames,
+    limit_rows,
+    rheology_rows,
+)
 from solver.model import Model
 from solver.monitor import check_state
 from solver.observe import relative_rotations
@@ -33,7 +39,9 @@ from solver.stabilize import project_joints
 from solver.state import State, StepInput, StepReport
 
 
-def build_rows(model: Model, state: State, body_rot: np.ndarray, vel_free: np.ndarray) -> tuple[Rows, int, np.ndarray]:
+def build_rows(
+    model: Model, state: State, body_rot: np.ndarray, vel_free: np.ndarray
+) -> tuple[Rows, int, np.ndarray]:
     """The step's row table, its contact count, and the joint of each rheology row."""
     h = model.options.h
     fr = joint_frames(model, state.body_pos, state.body_quat, body_rot)
@@ -46,7 +54,9 @@ def build_rows(model: Model, state: State, body_rot: np.ndarray, vel_free: np.nd
         blocks.append(limit_rows(model, fr, h))
     ncontact = 0
     if model.has_collision:
-        con = collide.collide(model.geometry, state.body_pos, state.body_quat, model.options.contact_margin)
+        con = collide.collide(
+            model.geometry, state.body_pos, state.body_quat, model.options.contact_margin
+        )
         ncontact = len(con.key)
         if ncontact:
             blocks.append(contact_rows(model, con, state.body_pos, vel_free))
@@ -155,7 +165,9 @@ def _rheology_update(
     q_sf = state.joint_q_sf.copy()
     if flow.any():
         dd = model.joint_dd[flow]
-        q_sf[flow] = three_element_update(model.joint_kf[flow], model.joint_df[flow], dd, q_sf[flow], w[flow], h)
+        q_sf[flow] = three_element_update(
+            model.joint_kf[flow], model.joint_df[flow], dd, q_sf[flow], w[flow], h
+        )
     can_yield = np.isfinite(model.joint_yield) & np.all(np.isfinite(model.joint_dd), axis=1)
     yielded = state.joint_yielded.copy()
     q_rel = relative_rotations(model, body_quat)
@@ -166,5 +178,9 @@ def _rheology_update(
     elastic = ~flowing(model, yielded) & model.joint_rheology
     q_sf[elastic] = elastic_deflection(q_rel[elastic], anchor[elastic])
     return dict(
-        joint_q_sf=q_sf, joint_yielded=yielded, joint_anchor=anchor, joint_torque_avg=avg, joint_torque=torque
+        joint_q_sf=q_sf,
+        joint_yielded=yielded,
+        joint_anchor=anchor,
+        joint_torque_avg=avg,
+        joint_torque=torque,
     )

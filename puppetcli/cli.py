@@ -1,0 +1,59 @@
+"""The ``puppetcli`` command group.  Commands live in puppetcli.commands, one module each.
+
+User mistakes (any PuppetError) end as one ``error: …`` line on stderr and exit
+status 1, never a traceback.  Modules of the commands are imported only when the
+command runs, so ``puppetcli --help`` stays fast.
+"""
+
+from __future__ import annotations
+
+import importlib
+
+import click
+
+from solver.errors import PuppetError
+
+COMMANDS = {
+    "validate": "puppetcli.commands.validate",
+    "pose": "puppetcli.commands.pose",
+    "bench": "puppetcli.commands.bench",
+}
+HELP = {
+    "validate": "Check a rig file and summarise what its simulation needs.",
+    "pose": "Run a manipulation script on a rig: keyframes and a trace.",
+    "bench": "Measure steps per second of the solvers on example scenes.",
+}
+
+
+class LazyGroup(click.Group):
+    """A group whose subcommands are imported on use and whose user errors print one line."""
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        return list(COMMANDS)
+
+    def get_command(self, ctx: click.Context, name: str) -> click.Command | None:
+        if name not in COMMANDS:
+            return None
+        return importlib.import_module(COMMANDS[name]).command
+
+    def format_commands(self, ctx: click.Context, formatter: click.HelpFormatter) -> None:
+        with formatter.section("Commands"):
+            formatter.write_dl([(name, HELP[name]) for name in COMMANDS])
+
+    def invoke(self, ctx: click.Context):
+        try:
+            return super().invoke(ctx)
+        except PuppetError as exc:
+            click.echo(f"error: {exc}", err=True)
+            ctx.exit(1)
+
+
+@click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="puppetcli")
+def cli() -> None:
+    """Pose characters like a ball-jointed doll: plastic-joint physics, keyframes, traces."""
+
+
+def main() -> None:
+    """Console entry point."""
+    cli(prog_name="puppetcli")
