@@ -36,6 +36,11 @@ class Options:
     contact_erp, contact_slop (m): penetration correction beyond the slop.
     contact_margin (m): gaps below this produce speculative contact rows.
     limit_margin (rad): limit rows exist once a joint is this close to a limit.
+    regularization: relative compliance ε·A_ii added to every hard row (one with
+        no compliance of its own): makes the row matrix definite when rows are
+        redundant (more hard rows than degrees of freedom, e.g. several contacts
+        plus limits on one body), so λ is unique and every solver solves the same
+        well-posed problem; it lets a hard row yield by the fraction ε.
     yield_filter_time (s): time constant of the low-pass on the joint torque
         norm compared with the yield torque.
     max_speed (m/s), max_angular_speed (rad/s), max_joint_gap (m): beyond these
@@ -53,6 +58,7 @@ class Options:
     contact_slop: float = 0.0005
     contact_margin: float = 0.01
     limit_margin: float = 0.05
+    regularization: float = 1e-6
     yield_filter_time: float = 0.02
     max_speed: float = 100.0
     max_angular_speed: float = 1000.0

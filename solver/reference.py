@@ -5,7 +5,8 @@ condition of the box-constrained QP  min ½λᵀQλ + cᵀλ  (Q symmetric PSD).
 Writing Q = LLᵀ (after a tiny ridge that makes it definite), the QP is the
 bounded least-squares problem min ½‖Lᵀλ + L⁻¹c‖², solved exactly by the
 active-set BVLS method of scipy.optimize.lsq_linear.  Friction bounds ±μλ_n
-depend on the solution; they are found by fixed-point iteration on λ_n.
+depend on the solution; they are found by a damped fixed-point iteration on
+λ_n (plain substitution can oscillate between two friction states).
 This shares no code with the PGS solver.
 """
 

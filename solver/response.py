@@ -7,6 +7,8 @@ digest is A = h·J M⁻¹ Jᵀ, so A_ij = jac_i · resp_j over the bodies they s
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from solver.rows import Rows
@@ -30,6 +32,14 @@ def row_response(
         return h * np.concatenate((lin, ang), axis=1)
 
     return one(rows.body_a, rows.jac_a), one(rows.body_b, rows.jac_b)
+
+
+def regularize(rows: Rows, resp: tuple[np.ndarray, np.ndarray], eps: float) -> Rows:
+    """Rows with compliance ε·A_ii on every row that has none (see Options.regularization)."""
+    if eps <= 0.0 or len(rows) == 0:
+        return rows
+    diag = np.einsum("ni,ni->n", rows.jac_a, resp[0]) + np.einsum("ni,ni->n", rows.jac_b, resp[1])
+    return replace(rows, comp=np.where(rows.comp > 0.0, rows.comp, eps * diag))
 
 
 def dense_blocks(rows: Rows, block_a: np.ndarray, block_b: np.ndarray, nbody: int) -> np.ndarray:

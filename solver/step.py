@@ -33,7 +33,7 @@ from solver.monitor import check_state
 from solver.observe import relative_rotations
 from solver.pgs import pgs_solve
 from solver.reference import reference_solve
-from solver.response import dense_system, row_response, world_inverse_inertia
+from solver.response import dense_system, regularize, row_response, world_inverse_inertia
 from solver.rows import KIND_RHEOLOGY, Rows, concat
 from solver.stabilize import project_joints
 from solver.state import State, StepInput, StepReport
@@ -116,6 +116,7 @@ def step(model: Model, state: State, inp: StepInput | None = None) -> tuple[Stat
     vel_free = free_velocity(model, state, inp, inv_i)
     rows, ncontact, rheo_joint = build_rows(model, state, body_rot, vel_free)
     resp = row_response(rows, model.body_inv_mass, inv_i, h)
+    rows = regularize(rows, resp, model.options.regularization)
     try:
         lam, vel, iters, residual, used = solve(model, state, rows, resp, vel_free)
     except ValueError as exc:

@@ -4,7 +4,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from solver.spec import BoneSpec, LimitSpec, RheologySpec, RigSpec, ShapeSpec, SolverSpec
+from solver.spec import (
+    BoneSpec,
+    GroundSpec,
+    LimitSpec,
+    RheologySpec,
+    RigSpec,
+    ShapeSpec,
+    SolverSpec,
+)
 
 
 def rheology(kf: float, df: float, dd: float, yield_torque: float = np.inf) -> RheologySpec:
@@ -45,22 +53,29 @@ def chain(
     method: str = "auto",
     limits: LimitSpec | None = None,
     masses=None,
+    lengths=None,
+    radius: float = 0.02,
+    shape: str = "capsule",
+    collide: bool = False,
+    ground: float | None = None,
 ) -> RigSpec:
     """A horizontal chain of n capsule links along +x from a stand at the origin."""
     bones = []
+    lengths = [link] * n if lengths is None else lengths
+    x = np.concatenate(([0.0], np.cumsum(lengths)))
     for i in range(n):
-        head = np.array([i * link, 1.0, 0.0])
+        head = np.array([x[i], 1.0, 0.0])
         bones.append(
             BoneSpec(
                 name=f"link{i}",
                 parent=f"link{i - 1}" if i else None,
                 head=head,
-                tail=head + [link, 0.0, 0.0],
-                shape=ShapeSpec("capsule", radius=0.02),
+                tail=head + [lengths[i], 0.0, 0.0],
+                shape=ShapeSpec(shape, radius=radius),
                 mass=1.0 if masses is None else masses[i],
                 rheology=rheo,
                 limits=limits or LimitSpec(),
-                collide=False,
+                collide=collide,
             )
         )
     return RigSpec(
@@ -68,5 +83,6 @@ def chain(
         bones=tuple(bones),
         root_mode=root_mode,
         gravity=np.array(gravity, dtype=float),
+        ground=None if ground is None else GroundSpec(height=ground, friction=0.7),
         solver=SolverSpec(h=h, method=method),
     )

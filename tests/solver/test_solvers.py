@@ -1,0 +1,179 @@
+"""PGS, direct and the dense reference solver on the same row tables."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from rigbuild import chain, rheology
+
+from solver import quat
+from solver.direct import direct_solve
+from solver.integrate import free_velocity
+from solver.model import build_model
+from solver.pgs import pgs_solve
+from solver.reference import reference_solve
+from solver.response import dense_system, regularize, row_response, world_inverse_inertia
+from solver.spec import LimitSpec
+from solver.state import StepInput, initial_state
+from solver.step import build_rows, step, warm_start
+
+
+def problem(model, state):
+    """The row table of the next step and what a solver needs."""
+    rot = quat.matrix(state.body_quat)
+    inv_i = world_inverse_inertia(model.body_inv_inertia, rot)
+    vel_free = free_velocity(model, state, StepInput(), inv_i)
+    rows, ncontact, _ = build_rows(model, state, rot, vel_free)
+    resp = row_response(rows, model.body_inv_mass, inv_i, model.options.h)
+    rows = regularize(rows, resp, model.options.regularization)
+    return rows, resp, vel_free, ncontact
+
+
+def contact_scene(seed: int):
+    """A free chain of 2–4 balls with limits, tumbling onto the ground.
+
+    One contact per body keeps the LCP's solution unique, even with friction, so
+    the reference is *the* solution (with several redundant contacts per body, λ
+    is not unique and PGS crawls along the degenerate direction).
+    """
+    rng = np.random.default_rng(seed)
+    n = int(rng.integers(2, 5))
+    spec = chain(
+        n,
+        0.005,
+        root_mode="free",
+        lengths=rng.uniform(0.05, 0.2, n),
+        radius=0.03,
+        shape="sphere",
+        collide=True,
+        ground=0.97 - 0.02 * rng.random(),
+        rheo=rheology(1.0, 0.1, 5.0),
+        limits=LimitSpec(swing=np.radians(rng.uniform(5.0, 30.0)), twist=(-0.1, 0.1)),
+        method="reference",
+    )
+    model = build_model(spec)
+    state = initial_state(model)
+    state = replace(
+        state,
+        body_quat=quat.exp(rng.normal(scale=0.3, size=(n, 3))),
+        body_omega=rng.normal(scale=2.0, size=(n, 3)),
+    )
+    for _ in range(40):
+        state, report = step(model, state)
+    return model, state
+
+
+def run_pgs(rows, resp, vel_free, iterations, lam0=None):
+    lam0 = np.zeros(len(rows)) if lam0 is None else lam0
+    return pgs_solve(
+        rows.body_a, rows.body_b, rows.jac_a, rows.jac_b, resp[0], resp[1], rows.lo, rows.hi,
+        rows.comp, rows.bias, rows.fric_of, rows.mu, vel_free, lam0, iterations, 0.0,
+    )  # fmt: skip
+
+
+def lcp_violation(q, c, lam, rows):
+    """max |λ − proj(λ − r/d)|·d with r = Qλ + c from the dense matrices: 0 at a solution."""
+    r = q @ lam + c
+    lo, hi = rows.lo.copy(), rows.hi.copy()
+    f = rows.fric_of >= 0
+    lo[f] = -rows.mu[f] * lam[rows.fric_of[f]]
+    hi[f] = -lo[f]
+    d = np.diag(q)
+    return np.max(np.abs(lam - np.clip(lam - r / d, lo, hi)) * d)
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_pgs_approaches_the_reference_as_iterations_grow(seed):
+    # Frictionless contacts make the problem a convex QP: the velocities are unique
+    # even though these scenes have more hard rows than degrees of freedom.
+    model, state = contact_scene(seed)
+    rows, resp, vel_free, ncontact = problem(model, state)
+    assert ncontact > 0 and not rows.equality_only
+    rows = replace(rows, mu=np.zeros(len(rows)))
+    q, c = dense_system(rows, resp, vel_free)
+    lam_ref = reference_solve(q, c, rows.lo, rows.hi, rows.fric_of, rows.mu)
+    vel_ref = vel_free + _response(rows, resp, lam_ref, len(vel_free))
+    errors = [
+        np.abs(run_pgs(rows, resp, vel_free, n)[1] - vel_ref).max() for n in (3, 30, 300, 30000)
+    ]
+    assert errors[0] > 1e-3, errors  # not trivial for PGS
+    assert errors[-1] < 1e-7 and errors[-1] < errors[1] < errors[0], errors
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_pgs_with_friction_converges_to_the_solution_of_the_lcp(seed):
+    # Friction bounds ±μλ_n depend on the solution.  Checks, all with the dense
+    # matrices: PGS's limit satisfies the complementarity conditions; with the
+    # friction bounds fixed at PGS's normal forces, the exact box-QP (unique: Q is
+    # definite) gives the same forces; and where the reference's own damped
+    # fixed-point iteration converges, it agrees too (it may fail to converge, as
+    # a plain fixed point on friction can).
+    model, state = contact_scene(seed)
+    rows, resp, vel_free, _ = problem(model, state)
+    q, c = dense_system(rows, resp, vel_free)
+    violation = [lcp_violation(q, c, run_pgs(rows, resp, vel_free, n)[0], rows) for n in (3, 30000)]
+    assert violation[-1] < 1e-9 < violation[0], violation
+    lam = run_pgs(rows, resp, vel_free, 30000)[0]
+    fixed = rows.fric_of >= 0
+    bound = rows.mu[fixed] * lam[rows.fric_of[fixed]]
+    lo, hi = rows.lo.copy(), rows.hi.copy()
+    lo[fixed], hi[fixed] = -bound, bound
+    no_friction_link = np.full(len(rows), -1)
+    lam_qp = reference_solve(q, c, lo, hi, no_friction_link, rows.mu)
+    assert np.abs(lam_qp - lam).max() < 1e-6 * max(1.0, np.abs(lam).max())
+    lam_ref = reference_solve(q, c, rows.lo, rows.hi, rows.fric_of, rows.mu)
+    if lcp_violation(q, c, lam_ref, rows) < 1e-9:
+        assert np.abs(lam_ref - lam).max() < 1e-6 * max(1.0, np.abs(lam).max())
+
+
+def _response(rows, resp, lam, nbody):
+    dv = np.zeros((nbody + 1, 6))
+    np.add.at(dv, rows.body_a, resp[0] * lam[:, None])
+    np.add.at(dv, rows.body_b, resp[1] * lam[:, None])
+    return dv[:-1]
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_direct_equals_reference_on_equality_only_scenes(seed):
+    rng = np.random.default_rng(100 + seed)
+    n = int(rng.integers(2, 8))
+    model = build_model(
+        chain(n, 0.01, lengths=rng.uniform(0.05, 0.3, n), rheo=rheology(2.0, 0.5, 3.0))
+    )
+    state = replace(initial_state(model), body_omega=rng.normal(size=(n, 3)))
+    for _ in range(5):
+        state, _ = step(model, state)
+    rows, resp, vel_free, _ = problem(model, state)
+    assert rows.equality_only
+    lam, residual = direct_solve(rows, resp, vel_free)
+    q, c = dense_system(rows, resp, vel_free)
+    lam_ref = reference_solve(q, c, rows.lo, rows.hi, rows.fric_of, rows.mu)
+    assert np.abs(lam - lam_ref).max() <= 1e-7 * max(1.0, np.abs(lam_ref).max())
+    assert residual < 1e-9
+
+
+def sweeps_to_reach(model, warm: bool, tol: float) -> float:
+    """Mean PGS sweeps per step needed to reach ``tol`` over a settling run."""
+    m = model.with_options(method="pgs", iterations=500, warm_start=warm)
+    state = initial_state(m)
+    counts = []
+    for k in range(200):
+        rows, resp, vel_free, _ = problem(m, state)
+        lam0 = warm_start(m, state, rows)
+        _, _, sweeps, _ = pgs_solve(
+            rows.body_a, rows.body_b, rows.jac_a, rows.jac_b, resp[0], resp[1], rows.lo,
+            rows.hi, rows.comp, rows.bias, rows.fric_of, rows.mu, vel_free, lam0, 500, tol,
+        )  # fmt: skip
+        state, _ = step(m, state)
+        if k >= 50:
+            counts.append(sweeps)
+    return float(np.mean(counts))
+
+
+def test_warm_start_needs_fewer_iterations():
+    model = build_model(chain(6, 0.005, collide=True, ground=0.95, rheo=rheology(2.0, 0.2, 5.0)))
+    cold = sweeps_to_reach(model, False, 1e-4)
+    warm = sweeps_to_reach(model, True, 1e-4)
+    assert warm < 0.5 * cold, (warm, cold)
