@@ -61,7 +61,7 @@ def contact_scene(seed: int):
         body_omega=rng.normal(scale=2.0, size=(n, 3)),
     )
     for _ in range(40):
-        state, report = step(model, state)
+        state, _ = step(model, state)
     return model, state
 
 
