@@ -5,15 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 import scipy.linalg
+from paper_experiment import DD, DF, INERTIA, KF, T_END, T_LOAD, TAU, recursion
 from rigbuild import one_bone
 
 from solver.model import build_model
 from solver.observe import joint_rotations
 from solver.state import StepInput, initial_state
 from solver.step import step
-
-KF, DF, DD, INERTIA, TAU = 1.0, 10.0, 100.0, 0.1, 1.0
-T_LOAD, T_END = 2.0, 6.0
 
 
 def simulate(h: float) -> np.ndarray:
@@ -26,26 +24,6 @@ def simulate(h: float) -> np.ndarray:
         state, _ = step(model, state, loaded if k < round(T_LOAD / h) else None)
         angles.append(joint_rotations(model, state)[0, 2])
     return np.array(angles)
-
-
-def recursion(h: float) -> np.ndarray:
-    """The exact discrete recursion of the digest, written out for one axis."""
-    s = KF * h + DF
-    c = (DD + DF + KF * h) / (DD * s)
-    d = KF / s
-    dq = (DD + DF) / (DD + DF + KF * h)
-    dw = DD * h / (DD + DF + KF * h)
-    theta = omega = q = 0.0
-    out = []
-    for k in range(round(T_END / h)):
-        tau = TAU if k < round(T_LOAD / h) else 0.0
-        omega_free = omega + h * tau / INERTIA
-        lam = -(omega_free + d * q) / (h / INERTIA + c)
-        omega = omega_free + h / INERTIA * lam
-        q = dq * q + dw * omega
-        theta += h * omega
-        out.append(theta)
-    return np.array(out)
 
 
 def continuous(times: np.ndarray) -> np.ndarray:
