@@ -1,0 +1,121 @@
+"""Benchmarks: steps per second of the solvers on example scenes, in one run.
+
+Speed is reported as a ratio against a baseline measured in the same run (the
+paper's setting: PGS, 15 iterations, warm start), never as an absolute pass/fail.
+Each configuration first takes a few untimed steps (JIT compilation, caches),
+then is timed over a fixed simulated duration.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+import numpy as np
+
+from puppetcli.rigfile import load_rig
+from puppetcli.runner import push_input
+from puppetcli.script import Push
+from solver.errors import SimulationError
+from solver.model import Model, build_model
+from solver.state import initial_state
+from solver.step import step
+
+RIGS = Path(__file__).resolve().parent.parent / "rigs"
+WARMUP_STEPS = 5
+BASELINE = "pgs"
+
+
+@dataclass(frozen=True)
+class BenchRow:
+    """One measured configuration."""
+
+    scene: str
+    h: float
+    solver: str
+    steps: int
+    seconds: float
+    steps_per_s: float
+    ratio: float
+    contacts: float
+    note: str = ""
+
+
+def doll_scenes() -> dict[str, Model]:
+    """`doll`: the full doll (ground contacts, limits); `doll-joints`: joints and rheology only."""
+    spec = load_rig(RIGS / "doll.yaml")
+    bare = replace(
+        spec,
+        ground=None,
+        bones=tuple(replace(b, limits=type(b.limits)(), collide=False) for b in spec.bones),
+    )
+    return {"doll": build_model(spec), "doll-joints": build_model(bare)}
+
+
+ARM_PUSH = Push(
+    "forearm_l", np.array([0.0, 60.0, 0.0]), np.zeros(3), np.array([0.25, 0.0, 0.0]), 0.3, 0
+)
+
+
+def time_run(model: Model, seconds: float) -> tuple[int, float, float]:
+    """(steps, wall seconds, mean contacts): the doll's arm pushed up for 0.3 s, then settling."""
+    state = initial_state(model)
+    for _ in range(WARMUP_STEPS):
+        state, _ = step(model, state)
+    state = initial_state(model)
+    n = max(1, round(seconds / model.options.h))
+    contacts = 0
+    start = time.perf_counter()
+    for _ in range(n):
+        inp = push_input(model, state, ARM_PUSH) if state.time < ARM_PUSH.duration else None
+        state, report = step(model, state, inp)
+        contacts += report.contacts
+    return n, time.perf_counter() - start, contacts / n
+
+
+def measure(
+    scenes: dict[str, Model], steps_h: list[float], solvers: list[str], seconds: float
+) -> list[BenchRow]:
+    """Every (scene, h, solver), with the ratio to the PGS baseline at the same scene and h."""
+    rows = []
+    for name, model in scenes.items():
+        for h in steps_h:
+            base = None
+            for solver in [BASELINE] + [s for s in solvers if s != BASELINE]:
+                if solver == "direct" and (model.has_collision or model.has_limits):
+                    rows.append(
+                        BenchRow(name, h, solver, 0, 0.0, 0.0, 0.0, 0.0, "n/a: contacts/limits")
+                    )
+                    continue
+                m = model.with_options(h=h, method=solver, iterations=15, warm_start=True)
+                span = seconds if solver != "reference" else min(seconds, 20 * h)
+                try:
+                    n, wall, contacts = time_run(m, span)
+                except SimulationError as exc:
+                    rows.append(BenchRow(name, h, solver, 0, 0.0, 0.0, 0.0, 0.0, str(exc)[:60]))
+                    continue
+                rate = n / wall
+                base = rate if solver == BASELINE else base
+                rows.append(BenchRow(name, h, solver, n, wall, rate, rate / base, contacts))
+    return rows
+
+
+def format_table(rows: list[BenchRow]) -> str:
+    """A fixed-width table of the rows."""
+    head = f"{'scene':<12} {'h (s)':>7} {'solver':<10} {'steps':>6} {'steps/s':>10} {'× pgs':>7} {'contacts':>8}  note"
+    lines = [head, "-" * len(head)]
+    for r in rows:
+        lines.append(
+            f"{r.scene:<12} {r.h:>7g} {r.solver:<10} {r.steps:>6} {r.steps_per_s:>10,.0f} "
+            f"{r.ratio:>7.2f} {r.contacts:>8.1f}  {r.note}"
+        )
+    return "\n".join(lines)
+
+
+def csv_text(rows: list[BenchRow]) -> str:
+    """The rows as CSV."""
+    fields = list(BenchRow.__dataclass_fields__)
+    out = [",".join(fields)]
+    out += [",".join(str(getattr(r, f)) for f in fields) for r in rows]
+    return "\n".join(out) + "\n"
