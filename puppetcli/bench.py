@@ -103,7 +103,10 @@ def measure(
 
 def format_table(rows: list[BenchRow]) -> str:
     """A fixed-width table of the rows."""
-    head = f"{'scene':<12} {'h (s)':>7} {'solver':<10} {'steps':>6} {'steps/s':>10} {'× pgs':>7} {'contacts':>8}  note"
+    head = (
+        f"{'scene':<12} {'h (s)':>7} {'solver':<10} {'steps':>6} {'steps/s':>10} "
+        f"{'× pgs':>7} {'contacts':>8}  note"
+    )
     lines = [head, "-" * len(head)]
     for r in rows:
         lines.append(
