@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 
 from puppetcli.rigfile import load_rig
-from puppetcli.runner import push_input
 from puppetcli.script import Push
+from puppetcli.snapshot import push_input
 from solver.errors import SimulationError
 from solver.model import Model, build_model
 from solver.state import initial_state

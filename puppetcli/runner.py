@@ -1,40 +1,53 @@
-"""Run a manipulation script on a model: the timeline, key capture and the trace.
+"""Run a manipulation script: the timeline, the pointer, grips, keys, expectations, trace.
 
-Actions run one after another on one timeline.  A timed action (push, wait)
-ends at its start time plus its duration; the simulation steps while
-t < t_end − h/2, so durations that are not multiples of h do not accumulate
-rounding.  A key captures the state at the moment it is reached.  If the
-simulation fails, the keys taken so far are returned with the error, and the
-trace keeps every step written before it.
+Actions run one after another on one timeline.  A timed action (push, wait, move,
+touch, rotate, twist) ends at its start time plus its duration; the simulation
+steps while t < t_end − h/2, so durations that are not multiples of h do not
+accumulate rounding.  The pointer keeps its last pose between motions, and a
+grip holds through waits and pushes until `release`.  A key captures the state
+when it is reached.  If the simulation fails, the keys and expectation results
+so far are returned with the error, and the trace keeps every step written.
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from puppetcli.keyframes import BonePose, Keyframe, KeyframeSet
+from puppetcli.errors import ScriptError
+from puppetcli.expect import ExpectResult, check
+from puppetcli.haptics import HapticChain
+from puppetcli.keyframes import KeyframeSet
+from puppetcli.pointer import Motion, pointer_over_step, still
+from puppetcli.runtrace import RunTrace
 from puppetcli.script import Key, Push, Script, Wait
-from puppetcli.trace import TraceWriter
+from puppetcli.script_actions import Expect, Grip, Move, Release, Rotate, Touch, Twist
+from puppetcli.snapshot import capture, push_input
 from solver import quat
 from solver.errors import SimulationError
+from solver.grip import Coupling, bone_reach, make_coupling, nearest_point, segment_distances
 from solver.model import Model
-from solver.observe import bone_heads, bone_tails, joint_rotations, relative_rotations
+from solver.observe import bone_points
 from solver.state import State, StepInput, StepReport, initial_state
 from solver.step import step
+
+POINTER_ACTIONS = (Grip, Move, Rotate, Twist, Release, Touch)
 
 
 @dataclass
 class RunResult:
-    """What a run produced: keys, final state, step count, wall time, and the error if it failed."""
+    """What a run produced."""
 
     keys: KeyframeSet
     state: State
     steps: int
     wall_time: float
+    expectations: list[ExpectResult] = field(default_factory=list)
+    peak_force: float = 0.0
+    peak_displayed: float = 0.0
     error: SimulationError | None = None
 
 
@@ -48,111 +61,162 @@ def script_model(model: Model, script: Script) -> Model:
     return model.with_options(**changes)
 
 
-def push_input(model: Model, state: State, push: Push) -> StepInput:
-    """Force and torque about the bone's centre of mass for a push at a bone-local point."""
-    b = model.bone_names.index(push.bone)
-    local = model.bone_head0[b] - model.body_pos0[b] + push.point
-    arm = quat.rotate(state.body_quat[b], local)
-    force = np.zeros((model.nbody, 3))
-    torque = np.zeros((model.nbody, 3))
-    force[b] = push.force
-    torque[b] = push.torque + np.cross(arm, push.force)
-    return StepInput(body_force=force, body_torque=torque)
-
-
-def capture(model: Model, state: State, label: str, extra: dict) -> Keyframe:
-    """A keyframe of every bone: head position, rotation from rest, joint rotation from rest."""
-    nbone = len(model.bone_names)
-    heads = bone_heads(model, state)
-    rotation = state.body_quat[:nbone]
-    local = rotation.copy()  # a root without a joint: its rotation relative to the world
-    local[model.joint_bone] = relative_rotations(model, state.body_quat)
-    bones = {
-        name: BonePose(head=heads[i], rotation=_canonical(rotation[i]), local=_canonical(local[i]))
-        for i, name in enumerate(model.bone_names)
-    }
-    return Keyframe(time=state.time, label=label, bones=bones, extra=extra)
-
-
-def _canonical(q: np.ndarray) -> np.ndarray:
-    """The quaternion with w ≥ 0 (q and −q are the same rotation)."""
-    return -q if q[0] < 0.0 else q.copy()
-
-
 class Runner:
-    """Steps a model through a script, writing the trace and collecting keys."""
+    """Steps a model through a script."""
 
     def __init__(
         self,
         model: Model,
-        trace: TraceWriter | None = None,
-        trace_every: int = 1,
+        script: Script,
+        trace: RunTrace | None = None,
         on_step: Callable[[State], None] | None = None,
     ) -> None:
-        self.model = model
-        self.trace = trace
-        self.trace_every = trace_every
-        self.on_step = on_step
+        self.model, self.script, self.trace, self.on_step = model, script, trace, on_step
         self.state = initial_state(model)
         self.keys = KeyframeSet()
+        self.motion: Motion = still(np.asarray(script.pointer_start, dtype=float), quat.IDENTITY)
+        self.pointer_on = any(isinstance(a, POINTER_ACTIONS) for a in script.actions)
+        self.coupling: Coupling | None = None
+        self.touch_suspended = False  # after a release, until the pointer is clear of the bones
+        self.reach = bone_reach(model)
+        self.haptics = HapticChain(script.max_force, script.max_torque, script.lowpass)
+        self.expectations: list[ExpectResult] = []
+        self.peak = self.peak_since_key = self.peak_displayed = 0.0
 
-    def run(self, script: Script) -> RunResult:
+    def run(self) -> RunResult:
         """Run every action, then wait out the script's duration."""
         start = time.perf_counter()
         error = None
+        handlers = self._handlers()
         try:
-            for action in script.actions:
-                self._do(action)
-            if script.duration is not None:
-                self.advance(script.duration - self.state.time, None)
+            for action in self.script.actions:
+                handlers[type(action)](action)
+            if self.script.duration is not None:
+                self.advance(self.script.duration - self.state.time)
         except SimulationError as exc:
             error = exc
-        wall = time.perf_counter() - start
-        return RunResult(self.keys, self.state, self.state.step, wall, error)
+        return RunResult(
+            self.keys, self.state, self.state.step, time.perf_counter() - start,
+            self.expectations, self.peak, self.peak_displayed, error,
+        )  # fmt: skip
 
-    def _do(self, action) -> None:
-        if isinstance(action, Push):
-            self.advance(action.duration, action)
-        elif isinstance(action, Wait):
-            self.advance(action.duration, None)
-        elif isinstance(action, Key):
-            self.keys.add(capture(self.model, self.state, action.label, {"line": action.line}))
-        else:  # pragma: no cover - the script parser only produces the types above
-            raise TypeError(f"unknown action {action!r}")
+    def _handlers(self) -> dict:
+        return {
+            Push: lambda a: self.advance(a.duration, a),
+            Wait: lambda a: self.advance(a.duration),
+            Key: self._key,
+            Expect: lambda a: self.expectations.append(
+                check(self.model, self.state, a, self.script.source)
+            ),
+            Grip: self._grip,
+            Release: self._release,
+            Move: self._move,
+            Touch: self._move,
+            Rotate: lambda a: self._turn(a.axis * a.angle, a.duration),
+            Twist: self._twist,
+        }
 
-    def advance(self, duration: float, push: Push | None) -> None:
+    def _key(self, action: Key) -> None:
+        extra = {"line": action.line, "peak_force": self.peak_since_key}
+        self.keys.add(capture(self.model, self.state, action.label, extra))
+        self.peak_since_key = 0.0
+        if self.trace is not None:
+            self.trace.keyframe(self.state.time, action.label, action.line, len(self.keys))
+
+    def _pointer_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        return self.motion.pose(self.state.time)
+
+    def _move(self, action: Move | Touch) -> None:
+        pos, q = self._pointer_pose()
+        delta = action.by if action.by is not None else action.to - pos
+        self.motion = Motion(
+            self.state.time, action.duration, pos, q, np.asarray(delta), np.zeros(3)
+        )
+        self.advance(action.duration)
+
+    def _turn(self, rotvec: np.ndarray, duration: float) -> None:
+        pos, q = self._pointer_pose()
+        self.motion = Motion(self.state.time, duration, pos, q, np.zeros(3), np.asarray(rotvec))
+        self.advance(duration)
+
+    def _twist(self, action: Twist) -> None:
+        b = self.coupling.body
+        ends = np.stack((self.model.bone_head0[b], self.model.bone_tail0[b]))
+        head, tail = bone_points(self.model, self.state, ends, bones=np.array([b, b]))
+        axis = (tail - head) / max(np.linalg.norm(tail - head), 1e-12)
+        self._turn(axis * action.angle, action.duration)
+
+    def _grip(self, action: Grip) -> None:
+        pos, _ = self._pointer_pose()
+        if action.bone is None:
+            b, point, dist = nearest_point(self.model, self.state, pos)
+            if dist > action.reach:
+                raise ScriptError(
+                    f"{self.script.source}:{action.line}: grip: expected a bone within "
+                    f"{action.reach:g} m of the pointer, "
+                    f"got '{self.model.bone_names[b]}' at {dist:.3f} m"
+                )
+        else:
+            b = self.model.bone_names.index(action.bone)
+            point = self._grip_point(b, action.point, pos)
+        self.coupling = make_coupling(
+            self.state, pointer_over_step(self.motion, self.state.time, 1.0, 0.0), b, point,
+            stiffness=action.stiffness, damping=action.damping, rot_stiffness=action.rot_stiffness,
+            rot_damping=action.rot_damping, force_limit=action.force_limit,
+            torque_limit=action.torque_limit, position_only=action.position_only,
+        )  # fmt: skip
+
+    def _grip_point(self, b: int, local: np.ndarray | None, pointer_pos: np.ndarray) -> np.ndarray:
+        """World grip point: the bone-local point given, else the bone's point nearest the
+        pointer."""
+        if local is None:
+            bone = np.full(len(self.model.bone_names), False)
+            bone[b] = True
+            return nearest_point(self.model, self.state, pointer_pos, bone)[1]
+        rest = self.model.bone_head0[b] + local
+        return bone_points(self.model, self.state, rest[None], bones=np.array([b]))[0]
+
+    def _release(self, action: Release) -> None:
+        # The hand that let go is still inside the bone: it touches nothing until clear.
+        self.coupling = None
+        self.touch_suspended = True
+
+    def _touching(self, pos: np.ndarray) -> bool:
+        """Free-mode touching is on, unless suspended after a release and not yet clear."""
+        if self.touch_suspended:
+            dist, _ = segment_distances(self.model, self.state, pos)
+            gap = self.reach + self.script.pointer_radius + self.model.options.contact_margin
+            self.touch_suspended = bool(np.any(dist <= gap))
+        return not self.touch_suspended
+
+    def advance(self, duration: float, push: Push | None = None) -> None:
         """Step until ``duration`` seconds have passed (nothing to do when ≤ 0)."""
         h = self.model.options.h
         t_end = self.state.time + duration
         while self.state.time < t_end - 0.5 * h:
-            inp = push_input(self.model, self.state, push) if push is not None else None
+            inp = self._input(push)
             self.state, report = step(self.model, self.state, inp)
-            self._record(report)
+            self._after_step(inp, report)
 
-    def _record(self, report: StepReport) -> None:
+    def _input(self, push: Push | None) -> StepInput:
+        loads = push_input(self.model, self.state, push) if push is not None else StepInput()
+        if not self.pointer_on:
+            return loads
+        free = self.coupling is None and self._touching(self.motion.pose(self.state.time)[0])
+        radius = self.script.pointer_radius if free else 0.0
+        ptr = pointer_over_step(self.motion, self.state.time, self.model.options.h, radius)
+        return StepInput(loads.body_force, loads.body_torque, ptr, self.coupling)
+
+    def _after_step(self, inp: StepInput, report: StepReport) -> None:
+        on_doll = report.grip_force if self.coupling is not None else report.touch_force
+        force = float(np.linalg.norm(on_doll))
+        self.peak = max(self.peak, force)
+        self.peak_since_key = max(self.peak_since_key, force)
+        shown = self.haptics.display(-on_doll, -report.grip_torque)
+        self.peak_displayed = max(self.peak_displayed, float(np.linalg.norm(shown[0])))
         if self.on_step is not None:
             self.on_step(self.state)
-        if self.trace is None or self.state.step % self.trace_every:
-            return
-        m, s = self.model, self.state
-        self.trace.write_step(
-            s.time,
-            joint_rotation=joint_rotations(m, s),
-            joint_elastic=s.joint_q_sf,
-            joint_torque=s.joint_torque,
-            bone_head=bone_heads(m, s),
-            bone_tail=bone_tails(m, s),
-            bone_quat=s.body_quat[: len(m.bone_names)],
-            stats=dict(
-                rows=report.rows,
-                contacts=report.contacts,
-                iterations=report.iterations,
-                residual=report.residual,
-                solver=report.solver,
-            ),
-        )
-
-
-def trace_writer(path, model: Model) -> TraceWriter:
-    """A trace writer for this model's skeleton."""
-    return TraceWriter(path, model.bone_names, list(model.bone_parent), model.joint_names)
+        if self.trace is not None:
+            self.trace.step(
+                self.state, report, inp, self.coupling, (-on_doll, -report.grip_torque), shown
+            )

@@ -161,34 +161,50 @@ def _transform(
 
 def bones_scene(ns: int, head: np.ndarray, tail: np.ndarray) -> dict:
     """``foxglove.SceneUpdate``: in ``puppet``, a LINE_LIST head→tail per bone and head balls."""
-    stamp = _stamp(ns)
+    segments = np.stack((head, tail), axis=1)
+    return line_scene(ns, "bones", segments, head, BONE_COLOR, JOINT_COLOR, JOINT_SPHERE_DIAMETER)
+
+
+def line_scene(
+    ns: int,
+    entity_id: str,
+    segments: np.ndarray,
+    centres: np.ndarray,
+    line_color: dict,
+    sphere_color: dict,
+    diameter: float,
+) -> dict:
+    """``foxglove.SceneUpdate``: one entity in ``puppet``, segments (k,2,3) and balls (m,3)."""
     line = {
-        "type": 2,  # LINE_LIST: points pair up as (head, tail)
+        "type": 2,  # LINE_LIST: points pair up as (start, end)
         "pose": _IDENTITY_POSE,
         "thickness": BONE_LINE_PIXELS,
         "scale_invariant": True,
-        "points": [_vec3(p) for p in np.stack((head, tail), axis=1).reshape(-1, 3)],
-        "color": BONE_COLOR,
+        "points": [_vec3(p) for p in np.reshape(segments, (-1, 3))],
+        "color": line_color,
         "colors": [],
         "indices": [],
     }
-    size = _vec3(np.full(3, JOINT_SPHERE_DIAMETER))
+    size = _vec3(np.full(3, diameter))
     spheres = [
-        {"pose": {**_IDENTITY_POSE, "position": _vec3(p)}, "size": size, "color": JOINT_COLOR}
-        for p in head
+        {"pose": {**_IDENTITY_POSE, "position": _vec3(p)}, "size": size, "color": sphere_color}
+        for p in np.reshape(centres, (-1, 3))
     ]
     entity = {
-        "timestamp": stamp,
+        "timestamp": _stamp(ns),
         "frame_id": PUPPET_FRAME,
-        "id": "bones",
-        "lifetime": {"sec": 0, "nsec": 0},  # forever; the next step's entity replaces it (same id)
+        "id": entity_id,
+        "lifetime": {
+            "sec": 0,
+            "nsec": 0,
+        },  # forever; the next message's entity replaces it (same id)
         "frame_locked": True,
         "metadata": [],
         "arrows": [],
         "cubes": [],
         "spheres": spheres,
         "cylinders": [],
-        "lines": [line],
+        "lines": [line] if len(segments) else [],
         "triangles": [],
         "texts": [],
         "models": [],

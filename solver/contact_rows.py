@@ -40,8 +40,17 @@ def tangent_basis(normal: np.ndarray, slip: np.ndarray) -> tuple[np.ndarray, np.
     return t1, quat.cross(normal, t1)
 
 
-def contact_rows(model: Model, con: Contacts, body_pos: np.ndarray, vel_free: np.ndarray) -> Rows:
-    """Rows of all contacts: normals first (in contact order), then their friction pairs."""
+def contact_rows(
+    model: Model,
+    con: Contacts,
+    body_pos: np.ndarray,
+    vel_free: np.ndarray,
+    velocity_a: np.ndarray | None = None,
+) -> Rows:
+    """Rows of all contacts: normals first (in contact order), then their friction pairs.
+
+    velocity_a (3,): velocity of a moving static side (the pointer); None = at rest.
+    """
     opt = model.options
     h = opt.h
     nc = len(con.key)
@@ -51,10 +60,13 @@ def contact_rows(model: Model, con: Contacts, body_pos: np.ndarray, vel_free: np
     jac_a, jac_b = point_jacobians(con.normal, r_a, r_b)
     d = con.depth
     bias = np.where(d < 0.0, -d / h, -opt.contact_erp * np.maximum(d - opt.contact_slop, 0.0) / h)
+    u = np.zeros(3) if velocity_a is None else velocity_a
+    bias = bias - con.normal @ u
     normal = make_rows(
         KIND_CONTACT, con.key, con.body_a, con.body_b, jac_a, jac_b, lo=0.0, bias=bias
     )
     slip = _point_velocity(vel_free, con.body_b, r_b) - _point_velocity(vel_free, con.body_a, r_a)
+    slip = slip - u
     t1, t2 = tangent_basis(con.normal, slip)
     axes = np.stack((t1, t2), axis=1).reshape(-1, 3)
     fa, fb = point_jacobians(axes, np.repeat(r_a, 2, axis=0), np.repeat(r_b, 2, axis=0))
@@ -66,6 +78,7 @@ def contact_rows(model: Model, con: Contacts, body_pos: np.ndarray, vel_free: np
         fa,
         fb,
         mu=np.repeat(con.friction, 2),
+        bias=-(axes @ u),
     )
     rows = concat([normal, friction])
     fric_of = np.concatenate((np.full(nc, -1), np.repeat(np.arange(nc), 2)))

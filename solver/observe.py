@@ -9,11 +9,16 @@ from solver.model import Model
 from solver.state import State
 
 
-def bone_points(model: Model, state: State, rest_points: np.ndarray) -> np.ndarray:
-    """World positions (nbone,3) of points given in the rest pose, one per bone."""
-    n = len(model.bone_names)
-    local = rest_points - model.body_pos0[:n]
-    return state.body_pos[:n] + quat.rotate(state.body_quat[:n], local)
+def bone_points(
+    model: Model, state: State, rest_points: np.ndarray, bones: np.ndarray | None = None
+) -> np.ndarray:
+    """World positions of points given in the rest pose, carried by bones.
+
+    bones (k,): the bone of each point; None = one point per bone, in order.
+    """
+    b = np.arange(len(model.bone_names)) if bones is None else bones
+    local = rest_points - model.body_pos0[b]
+    return state.body_pos[b] + quat.rotate(state.body_quat[b], local)
 
 
 def bone_heads(model: Model, state: State) -> np.ndarray:

@@ -50,6 +50,12 @@ class Rows:
         return len(self.key)
 
     @property
+    def bilateral(self) -> bool:
+        """True when every row may push both ways (lo < 0 < hi) and none is friction:
+        the direct solve applies, valid when its forces stay within the bounds."""
+        return bool(np.all(self.lo < 0.0) and np.all(self.hi > 0.0) and np.all(self.fric_of < 0))
+
+    @property
     def equality_only(self) -> bool:
         """True when no row has a finite bound: the problem is a linear system."""
         return bool(np.all(np.isinf(self.lo)) and np.all(np.isinf(self.hi)))

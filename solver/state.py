@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -49,21 +50,34 @@ class StepInput:
 
     body_force (nb,3) N and body_torque (nb,3) N·m, world frame, about each
     body's centre of mass.  ``None`` = no external load.
+    pointer: the haptic pointer (solver.grip.Pointer) or None; coupling: the grip
+    (solver.grip.Coupling) or None.  Without a coupling, a pointer with a radius
+    touches the bones (free mode).
     """
 
     body_force: np.ndarray | None = None
     body_torque: np.ndarray | None = None
+    pointer: Any = None
+    coupling: Any = None
 
 
 @dataclass(frozen=True)
 class StepReport:
-    """What one step did, for traces and benchmarks."""
+    """What one step did, for traces and benchmarks.
+
+    grip_force (3,) N, grip_torque (3,) N·m: the coupling's wrench on the gripped
+    bone (torque about the grip point); touch_force (3,) N: the pointer's contact
+    force on the bones in free mode.  The user's hand feels their opposite.
+    """
 
     rows: int
     contacts: int
     iterations: int
     residual: float
     solver: str
+    grip_force: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    grip_torque: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    touch_force: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
 
 def initial_state(model: Model) -> State:

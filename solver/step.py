@@ -19,6 +19,7 @@ from solver.compliance import three_element_update
 from solver.contact_rows import contact_rows
 from solver.direct import direct_solve
 from solver.errors import SimulationError
+from solver.grip import coupling_rows, coupling_wrench
 from solver.integrate import free_velocity, integrate_pose
 from solver.joints import (
     anchor_rows,
@@ -34,15 +35,21 @@ from solver.observe import relative_rotations
 from solver.pgs import pgs_solve
 from solver.reference import reference_solve
 from solver.response import dense_system, regularize, row_response, world_inverse_inertia
-from solver.rows import KIND_RHEOLOGY, Rows, concat
+from solver.rows import KEY_SHIFT, KIND_CONTACT, KIND_FRICTION, KIND_RHEOLOGY, Rows, concat
 from solver.stabilize import project_joints
 from solver.state import State, StepInput, StepReport
+from solver.touch import POINTER_KEY_OFFSET, pointer_contacts
 
 
 def build_rows(
-    model: Model, state: State, body_rot: np.ndarray, vel_free: np.ndarray
+    model: Model,
+    state: State,
+    body_rot: np.ndarray,
+    vel_free: np.ndarray,
+    inp: StepInput | None = None,
 ) -> tuple[Rows, int, np.ndarray]:
     """The step's row table, its contact count, and the joint of each rheology row."""
+    inp = inp or StepInput()
     h = model.options.h
     fr = joint_frames(model, state.body_pos, state.body_quat, body_rot)
     blocks = [anchor_rows(model, fr, h, vel_free[:, 3:])]
@@ -60,7 +67,24 @@ def build_rows(
         ncontact = len(con.key)
         if ncontact:
             blocks.append(contact_rows(model, con, state.body_pos, vel_free))
+    blocks.extend(_pointer_rows(model, state, inp, vel_free))
     return concat(blocks), ncontact, rheo_joint
+
+
+def _pointer_rows(model: Model, state: State, inp: StepInput, vel_free: np.ndarray) -> list[Rows]:
+    """Grip coupling rows, or (free mode) the pointer sphere's contact rows."""
+    ptr = inp.pointer
+    if ptr is None:
+        return []
+    h = model.options.h
+    if inp.coupling is not None:
+        return [coupling_rows(state, ptr, inp.coupling, h)]
+    if ptr.radius <= 0.0:
+        return []
+    con = pointer_contacts(model, state, ptr.pos - h * ptr.vel, ptr.radius)
+    if len(con.key) == 0:
+        return []
+    return [contact_rows(model, con, state.body_pos, vel_free, velocity_a=ptr.vel)]
 
 
 def warm_start(model: Model, state: State, rows: Rows) -> np.ndarray:
@@ -81,20 +105,24 @@ def solve(model: Model, state: State, rows: Rows, resp: tuple, vel_free: np.ndar
     opt = model.options
     method = opt.method
     if method == "auto":
-        method = "direct" if rows.equality_only else "pgs"
+        method = "direct" if rows.bilateral else "pgs"
+    lam0 = warm_start(model, state, rows)
     if method == "direct":
-        if not rows.equality_only:
-            raise ValueError("the direct solver handles equality rows only; use 'auto'")
+        if not rows.bilateral:
+            raise ValueError(
+                "the direct solver handles two-sided rows only (no contacts or limits)"
+            )
         lam, residual = direct_solve(rows, resp, vel_free)
-        return lam, _apply(rows, resp, vel_free, lam), 1, residual, "direct"
+        if np.all((lam >= rows.lo) & (lam <= rows.hi)):
+            return lam, _apply(rows, resp, vel_free, lam), 1, residual, "direct"
+        lam0 = np.clip(lam, rows.lo, rows.hi)  # a force limit is hit: finish with PGS
     if method == "reference":
         q, c = dense_system(rows, resp, vel_free)
         lam = reference_solve(q, c, rows.lo, rows.hi, rows.fric_of, rows.mu)
         return lam, _apply(rows, resp, vel_free, lam), 1, 0.0, "reference"
     lam, vel, sweeps, residual = pgs_solve(
         rows.body_a, rows.body_b, rows.jac_a, rows.jac_b, resp[0], resp[1], rows.lo, rows.hi,
-        rows.comp, rows.bias, rows.fric_of, rows.mu, vel_free, warm_start(model, state, rows),
-        opt.iterations, 1e-12,
+        rows.comp, rows.bias, rows.fric_of, rows.mu, vel_free, lam0, opt.iterations, 1e-12,
     )  # fmt: skip
     return lam, vel, sweeps, residual, "pgs"
 
@@ -114,7 +142,7 @@ def step(model: Model, state: State, inp: StepInput | None = None) -> tuple[Stat
     body_rot = quat.matrix(state.body_quat)
     inv_i = world_inverse_inertia(model.body_inv_inertia, body_rot)
     vel_free = free_velocity(model, state, inp, inv_i)
-    rows, ncontact, rheo_joint = build_rows(model, state, body_rot, vel_free)
+    rows, ncontact, rheo_joint = build_rows(model, state, body_rot, vel_free, inp)
     resp = row_response(rows, model.body_inv_mass, inv_i, h)
     rows = regularize(rows, resp, model.options.regularization)
     try:
@@ -139,7 +167,18 @@ def step(model: Model, state: State, inp: StepInput | None = None) -> tuple[Stat
         warm_lam=lam[order],
         **rheo,
     )
-    return new, StepReport(len(rows), ncontact, iters, float(residual), used)
+    grip_force, grip_torque = coupling_wrench(rows, lam)
+    return new, StepReport(
+        len(rows), ncontact, iters, float(residual), used, grip_force, grip_torque,
+        touch_force(rows, lam),
+    )  # fmt: skip
+
+
+def touch_force(rows: Rows, lam: np.ndarray) -> np.ndarray:
+    """Force (3,) the pointer sphere's contacts put on the bones (normal and friction)."""
+    ident = rows.key & ((1 << KEY_SHIFT) - 1)
+    sel = (rows.kind >= KIND_CONTACT) & (rows.kind <= KIND_FRICTION) & (ident >= POINTER_KEY_OFFSET)
+    return rows.jac_b[sel, :3].T @ lam[sel]
 
 
 def _rheology_update(

@@ -8,14 +8,17 @@ from pathlib import Path
 
 import click
 
+from puppetcli.errors import ScriptError
 from puppetcli.keyframes import write_keyframes
 from puppetcli.outputs import prepare_outdir
 from puppetcli.rigfile import load_rig
-from puppetcli.runner import Runner, RunResult, script_model, trace_writer
+from puppetcli.runner import Runner, RunResult, script_model
+from puppetcli.runtrace import RunTrace
 from puppetcli.script import load_script
 from solver.model import build_model
 
 OUTPUTS = ["keyframes.json", "trace.mcap"]
+MAX_STEPS = 10_000_000  # a run longer than this is a mistake in the script (h or a duration)
 
 
 @click.command("pose")
@@ -51,21 +54,36 @@ def command(
     spec = load_rig(rig)
     plan = load_script(script, spec)
     model = script_model(build_model(spec), plan)
+    steps = max(plan.duration or 0.0, _timeline_length(plan)) / model.options.h
+    if steps > MAX_STEPS:
+        raise ScriptError(
+            f"{script}: expected at most {MAX_STEPS:,} steps, got {steps:,.0f} "
+            f"(duration over step h = {model.options.h:g} s)"
+        )
     prepare_outdir(outdir, OUTPUTS if not no_trace else OUTPUTS[:1], force)
     result = _run(model, plan, outdir, trace_every, no_trace)
     write_keyframes(outdir / "keyframes.json", model.name, result.keys)
     _report(result, model.options.h)
     if result.error is not None:
         raise result.error
+    failed = [r for r in result.expectations if not r.passed]
+    for r in failed:
+        click.echo(f"expectation failed: {r.message}", err=True)
+    if failed:
+        raise ScriptError(
+            f"{script}: {len(failed)} of {len(result.expectations)} expectations failed"
+        )
 
 
 def _run(model, plan, outdir: Path, trace_every: int, no_trace: bool) -> RunResult:
     total = max(plan.duration or 0.0, _timeline_length(plan))
     with _progress(round(total / model.options.h)) as tick:
+        runner = Runner(model, plan, on_step=tick)
         if no_trace:
-            return Runner(model, on_step=tick).run(plan)
-        with trace_writer(outdir / "trace.mcap", model) as trace:
-            return Runner(model, trace, trace_every, on_step=tick).run(plan)
+            return runner.run()
+        with RunTrace(outdir / "trace.mcap", model, plan, trace_every, runner.pointer_on) as trace:
+            runner.trace = trace
+            return runner.run()
 
 
 @contextlib.contextmanager
@@ -84,7 +102,13 @@ def _timeline_length(plan) -> float:
 
 def _report(result: RunResult, h: float) -> None:
     rate = result.steps / result.wall_time if result.wall_time > 0 else float("inf")
-    click.echo(
+    passed = sum(r.passed for r in result.expectations)
+    lines = [
         f"{len(result.keys)} keys, {result.state.time:.3f} s simulated in {result.wall_time:.2f} s "
-        f"({result.steps} steps of {h:g} s, {rate:,.0f} steps/s)"
-    )
+        f"({result.steps} steps of {h:g} s, {rate:,.0f} steps/s)",
+        f"peak force on the doll {result.peak_force:.1f} N, "
+        f"peak displayed {result.peak_displayed:.1f} N",
+    ]
+    if result.expectations:
+        lines.append(f"expectations: {passed} of {len(result.expectations)} passed")
+    click.echo("\n".join(lines))

@@ -1,0 +1,60 @@
+"""The haptic pointer's motion: minimum-jerk moves and rotations, sampled per step.
+
+A move from p0 to p1 over T follows p(t) = p0 + (p1 − p0)·s(t/T) with the
+minimum-jerk profile s(τ) = 10τ³ − 15τ⁴ + 6τ⁵ (zero velocity and acceleration at
+both ends).  A rotation by angle θ about a world axis n through the pointer
+follows q(t) = exp(n·θ·s(t/T)) ⊗ q0.  The velocity handed to the solver for a
+step is the exact mean over that step: (pose_end − pose_start)/h.
+
+Workspace mapping (device → world): world = offset + scale · device.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from solver import quat
+from solver.grip import Pointer
+
+
+def min_jerk(tau: float) -> float:
+    """s(τ) = 10τ³ − 15τ⁴ + 6τ⁵, clamped to [0, 1]."""
+    t = min(max(tau, 0.0), 1.0)
+    return t * t * t * (10.0 + t * (-15.0 + 6.0 * t))
+
+
+@dataclass(frozen=True)
+class Motion:
+    """A pointer motion from (pos0, quat0) starting at t0 over ``duration``."""
+
+    t0: float
+    duration: float
+    pos0: np.ndarray
+    quat0: np.ndarray
+    delta: np.ndarray  # (3,) displacement
+    rotvec: np.ndarray  # (3,) world rotation vector
+
+    def pose(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """(position, quaternion) at time t."""
+        s = min_jerk((t - self.t0) / self.duration) if self.duration > 0.0 else 1.0
+        return self.pos0 + s * self.delta, quat.mul(quat.exp(s * self.rotvec), self.quat0)
+
+
+def still(pos: np.ndarray, q: np.ndarray) -> Motion:
+    """The pointer at rest."""
+    return Motion(0.0, 0.0, pos, q, np.zeros(3), np.zeros(3))
+
+
+def pointer_over_step(motion: Motion, t: float, h: float, radius: float) -> Pointer:
+    """The solver's Pointer for the step [t, t + h]: pose at its end, mean velocity over it."""
+    p0, q0 = motion.pose(t)
+    p1, q1 = motion.pose(t + h)
+    omega = quat.log(quat.mul(q1, quat.conj(q0))) / h
+    return Pointer(p1, q1, (p1 - p0) / h, omega, radius)
+
+
+def device_from_world(pos: np.ndarray, offset: np.ndarray, scale: float) -> np.ndarray:
+    """Device coordinates of a world position (inverse of world = offset + scale·device)."""
+    return (pos - offset) / scale

@@ -1,0 +1,103 @@
+"""The trace of a run: the simulator's step channels plus the device, haptics and keys.
+
+Channels added to trace.mcap's step channels (see puppetcli.trace):
+`/device/pose` (puppetcli.DevicePose), `/haptic/wrench` (puppetcli.HapticWrench),
+`/puppet/keyframe` (puppetcli.KeyframeEvent, when a key is taken) and
+`/puppet/pointer` (foxglove.SceneUpdate: the pointer and, in grip mode, the
+coupling line to the grip point).  Device channels exist only for scripts that
+use the pointer.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from puppetcli.pointer import device_from_world
+from puppetcli.script import Script
+from puppetcli.trace import TraceWriter, line_scene, load_schema
+from solver import quat
+from solver.grip import Coupling
+from solver.model import Model
+from solver.observe import bone_heads, bone_tails, joint_rotations
+from solver.state import State, StepInput, StepReport
+
+POINTER_COLOR = {"r": 1.0, "g": 0.3, "b": 0.2, "a": 1.0}
+COUPLING_COLOR = {"r": 1.0, "g": 0.8, "b": 0.1, "a": 1.0}
+CHANNELS = {
+    "/device/pose": "puppetcli.DevicePose",
+    "/haptic/wrench": "puppetcli.HapticWrench",
+    "/puppet/pointer": "foxglove.SceneUpdate",
+}
+
+
+class RunTrace:
+    """Writes every ``every``-th step (and every key) of a run."""
+
+    def __init__(self, path: Path, model: Model, script: Script, every: int, pointer: bool) -> None:
+        self.model, self.script, self.every, self.pointer = model, script, every, pointer
+        self.writer = TraceWriter(
+            path, model.bone_names, list(model.bone_parent), model.joint_names
+        )
+        self.writer.add_channel(
+            "/puppet/keyframe", "puppetcli.KeyframeEvent", load_schema("puppetcli.KeyframeEvent")
+        )
+        if pointer:
+            for topic, name in CHANNELS.items():
+                self.writer.add_channel(topic, name, load_schema(name))
+
+    def __enter__(self) -> RunTrace:
+        self.writer.__enter__()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.writer.__exit__(*exc)
+
+    def keyframe(self, t: float, label: str, line: int, index: int) -> None:
+        self.writer.write(
+            "/puppet/keyframe", t, {"t": t, "label": label, "line": line, "index": index}
+        )
+
+    def step(self, s: State, report: StepReport, inp: StepInput, coupling: Coupling | None,
+             requested: tuple, displayed: tuple) -> None:  # fmt: skip
+        if s.step % self.every:
+            return
+        m = self.model
+        self.writer.write_step(
+            s.time, joint_rotation=joint_rotations(m, s), joint_elastic=s.joint_q_sf,
+            joint_torque=s.joint_torque, bone_head=bone_heads(m, s), bone_tail=bone_tails(m, s),
+            bone_quat=s.body_quat[: len(m.bone_names)],
+            stats=dict(rows=report.rows, contacts=report.contacts, iterations=report.iterations,
+                       residual=report.residual, solver=report.solver),
+        )  # fmt: skip
+        if self.pointer and inp.pointer is not None:
+            self._device(s, inp.pointer, coupling, requested, displayed)
+
+    def _device(
+        self, s: State, ptr, coupling: Coupling | None, requested: tuple, displayed: tuple
+    ) -> None:
+        sc = self.script
+        bone = None if coupling is None else self.model.bone_names[coupling.body]
+        self.writer.write("/device/pose", s.time, {
+            "t": s.time, "position": ptr.pos, "orientation": ptr.quat,
+            "device_position": device_from_world(ptr.pos, sc.workspace_offset, sc.workspace_scale),
+            "mode": "free" if coupling is None else "grip", "bone": bone,
+        })  # fmt: skip
+        self.writer.write("/haptic/wrench", s.time, {
+            "t": s.time,
+            "requested": {"force": requested[0], "torque": requested[1]},
+            "displayed": {"force": displayed[0], "torque": displayed[1]},
+        })  # fmt: skip
+        segments = np.zeros((0, 2, 3))
+        if coupling is not None:
+            b = coupling.body
+            grip = s.body_pos[b] + quat.rotate(s.body_quat[b], coupling.anchor)
+            segments = np.array([[ptr.pos, grip]])
+        scene = line_scene(_ns(s.time), "pointer", segments, ptr.pos[None], COUPLING_COLOR,
+                           POINTER_COLOR, max(2.0 * sc.pointer_radius, 0.01))  # fmt: skip
+        self.writer.write("/puppet/pointer", s.time, scene)
+
+
+def _ns(t: float) -> int:
+    return round(t * 1e9)
