@@ -17,11 +17,13 @@ COMMANDS = {
     "validate": "puppetcli.commands.validate",
     "pose": "puppetcli.commands.pose",
     "bench": "puppetcli.commands.bench",
+    "render": "puppetcli.commands.render",
 }
 HELP = {
     "validate": "Check a rig file and summarise what its simulation needs.",
     "pose": "Run a manipulation script on a rig: keyframes and a trace.",
     "bench": "Measure steps per second of the solvers on example scenes.",
+    "render": "Draw poses: a contact sheet of keys, or a video of a trace.",
 }
 
 

@@ -11,13 +11,15 @@ import click
 from puppetcli.errors import ScriptError
 from puppetcli.keyframes import write_keyframes
 from puppetcli.outputs import prepare_outdir
+from puppetcli.render import render_keys
 from puppetcli.rigfile import load_rig
 from puppetcli.runner import Runner, RunResult, script_model
 from puppetcli.runtrace import RunTrace
 from puppetcli.script import load_script
+from puppetcli.skeleton import Skeleton
 from solver.model import build_model
 
-OUTPUTS = ["keyframes.json", "trace.mcap"]
+OUTPUTS = ["keyframes.json", "trace.mcap", "sheet.png", "keys"]
 MAX_STEPS = 10_000_000  # a run longer than this is a mistake in the script (h or a duration)
 
 
@@ -42,27 +44,41 @@ MAX_STEPS = 10_000_000  # a run longer than this is a mistake in the script (h o
     help="Write the trace every N steps.",
 )
 @click.option("--no-trace", is_flag=True, help="Do not write trace.mcap.")
+@click.option("--no-render", is_flag=True, help="Do not draw keys/NNN.png and sheet.png.")
+@click.option(
+    "--view",
+    default="iso",
+    show_default=True,
+    help="Camera for the pictures: front, side, top, iso or custom:AZ,EL[,DIST].",
+)
 def command(
-    rig: Path, script: Path, outdir: Path, force: bool, trace_every: int, no_trace: bool
+    rig: Path,
+    script: Path,
+    outdir: Path,
+    force: bool,
+    trace_every: int,
+    no_trace: bool,
+    no_render: bool,
+    view: str,
 ) -> None:
-    """Run a manipulation script on a rig: keyframes and a trace.
+    """Run a manipulation script on a rig: keyframes, a trace and pictures.
 
-    Writes OUTDIR/keyframes.json and OUTDIR/trace.mcap (existing files are kept
-    unless --force).  If the simulation fails, the keys taken and the trace steps
-    written before the failure are still saved, and the exit status is 1.
+    Writes OUTDIR/keyframes.json, OUTDIR/trace.mcap, OUTDIR/keys/NNN.png (one
+    picture per key) and OUTDIR/sheet.png (all keys, one framing); existing files
+    are kept unless --force.  If the simulation fails, the keys taken and the trace
+    steps written before the failure are still saved, and the exit status is 1.
+    Failed `expect` lines are printed and also end with exit status 1.
     """
     spec = load_rig(rig)
     plan = load_script(script, spec)
     model = script_model(build_model(spec), plan)
-    steps = max(plan.duration or 0.0, _timeline_length(plan)) / model.options.h
-    if steps > MAX_STEPS:
-        raise ScriptError(
-            f"{script}: expected at most {MAX_STEPS:,} steps, got {steps:,.0f} "
-            f"(duration over step h = {model.options.h:g} s)"
-        )
-    prepare_outdir(outdir, OUTPUTS if not no_trace else OUTPUTS[:1], force)
+    _check_length(script, plan, model.options.h)
+    outputs = [name for name in OUTPUTS if not (no_trace and name == "trace.mcap")]
+    prepare_outdir(outdir, outputs if not no_render else outputs[:2], force)
     result = _run(model, plan, outdir, trace_every, no_trace)
     write_keyframes(outdir / "keyframes.json", model.name, result.keys)
+    if not no_render and len(result.keys):
+        render_keys(outdir, Skeleton.from_spec(spec), list(result.keys), spec, view=view)
     _report(result, model.options.h)
     if result.error is not None:
         raise result.error
@@ -72,6 +88,15 @@ def command(
     if failed:
         raise ScriptError(
             f"{script}: {len(failed)} of {len(result.expectations)} expectations failed"
+        )
+
+
+def _check_length(script: Path, plan, h: float) -> None:
+    steps = max(plan.duration or 0.0, _timeline_length(plan)) / h
+    if steps > MAX_STEPS:
+        raise ScriptError(
+            f"{script}: expected at most {MAX_STEPS:,} steps, got {steps:,.0f} "
+            f"(duration over step h = {h:g} s)"
         )
 
 

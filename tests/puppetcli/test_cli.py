@@ -239,10 +239,11 @@ def script_labels(text: str) -> list[str]:
 
 
 def pose(tmp_path: Path, *extra: str, rig: Path | None = None, script: str = SCRIPT) -> Result:
-    """``pose RIG SCRIPT -o tmp_path/out``; the rig defaults to RIG written into tmp_path."""
+    """``pose RIG SCRIPT -o tmp_path/out --no-render`` (the data outputs only; pictures are
+    tested in test_pose_draws_every_key); the rig defaults to RIG written into tmp_path."""
     rig = rig or write(tmp_path, "rig.yaml", RIG)
     script_path = write(tmp_path, "script.yaml", script)
-    return invoke("pose", rig, script_path, "-o", tmp_path / "out", *extra)
+    return invoke("pose", rig, script_path, "-o", tmp_path / "out", "--no-render", *extra)
 
 
 def summary_numbers(stdout: str) -> tuple[int, int, float]:
@@ -299,6 +300,21 @@ def test_pose_writes_keyframes_and_trace(tmp_path):
     assert set(keys[0]["bones"]) == {b["name"] for b in yaml.safe_load(RIG)["bones"]}
     joints = read_mcap(out / "trace.mcap")["/puppet/joints"]
     assert joints[-1] == round(0.2e9)
+
+
+def test_pose_draws_every_key(tmp_path):
+    rig = write(tmp_path, "rig.yaml", RIG)
+    script_path = write(tmp_path, "script.yaml", SCRIPT)
+    result = invoke("pose", rig, script_path, "-o", tmp_path / "out")
+    assert result.exit_code == 0, result.output
+    out = tmp_path / "out"
+    n = len(script_labels(SCRIPT))
+    assert sorted(p.name for p in (out / "keys").iterdir()) == [
+        f"{i:03d}.png" for i in range(1, n + 1)
+    ]
+    assert (out / "sheet.png").stat().st_size > 0
+    again = invoke("pose", rig, script_path, "-o", out)
+    assert again.exit_code == 1 and "--force" in again.stderr  # pictures are outputs too
 
 
 @pytest.mark.parametrize("existing", OUTPUTS)

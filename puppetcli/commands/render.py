@@ -1,0 +1,140 @@
+"""``puppetcli render INPUT -o SHEET.png``: a contact sheet of poses, or a video of a trace."""
+
+from __future__ import annotations
+
+import contextlib
+import sys
+from pathlib import Path
+
+import click
+
+from puppetcli.outputs import OutputError
+from puppetcli.render import contact_sheet, default_cols, frame_poses, render_pose, write_png
+from puppetcli.render_camera import RenderError, parse_size, parse_view
+from puppetcli.render_inputs import input_kind, key_poses, trace_poses
+from puppetcli.rigfile import load_rig
+from puppetcli.skeleton import Skeleton
+
+
+@click.command("render")
+@click.argument("input_path", metavar="INPUT", type=click.Path(dir_okay=False, path_type=Path))
+@click.option(
+    "-o",
+    "--out",
+    "sheet",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Contact sheet to write (.png): every key in a labelled grid.",
+)
+@click.option(
+    "--rig",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="Rig file of the poses (bone shapes, props, ground). Required.",
+)
+@click.option("--cols", type=int, help="Columns of the sheet [default: up to 4, then ~square].")
+@click.option(
+    "--view",
+    default="iso",
+    show_default=True,
+    help="front (from +z), side (from +x), top (from +y), iso, or custom:AZ,EL[,DIST] "
+    "(degrees, m).",
+)
+@click.option("--size", default="480x480", show_default=True, help="Panel size WIDTHxHEIGHT, px.")
+@click.option(
+    "--video",
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="With a trace.mcap INPUT: a video of every step (.mp4 mp4v or .avi MJPG).",
+)
+@click.option("--fps", type=float, default=30.0, show_default=True, help="Video frame rate.")
+@click.option("--force", is_flag=True, help="Overwrite existing output files.")
+def command(
+    input_path: Path,
+    sheet: Path | None,
+    rig: Path | None,
+    cols: int | None,
+    view: str,
+    size: str,
+    video: Path | None,
+    fps: float,
+    force: bool,
+) -> None:
+    """Draw poses: a contact sheet of keys, or a video of a trace.
+
+    INPUT is keyframes.json, a .bvh file (when a BVH reader exists) or a
+    trace.mcap (sheet: its key moments; --video: every step).  All panels share
+    one perspective camera fitted to all poses, so they compare directly.
+    Existing outputs are kept unless --force.
+    """
+    camera_view, panel = parse_view(view), parse_size(size)
+    kind = _check_request(input_path, sheet, rig, cols, video, fps, force)
+    spec = load_rig(rig)
+    skel = Skeleton.from_spec(spec)
+    if kind == "trace":
+        steps, poses = trace_poses(input_path, skel)
+    else:
+        steps, poses = [], key_poses(input_path, kind, skel)
+    if sheet is not None:
+        framing = frame_poses(skel, poses, spec, camera_view, panel)
+        ncols = cols if cols is not None else default_cols(len(poses))
+        _mkdir(sheet)
+        write_png(sheet, contact_sheet([render_pose(skel, p, spec, framing) for p in poses], ncols))
+        rows = -(-len(poses) // min(ncols, len(poses)))
+        click.echo(f"{sheet}: {len(poses)} panels, {min(ncols, len(poses))} × {rows}, "
+                   f"{camera_view.name} view, {panel[0]}x{panel[1]} px each")  # fmt: skip
+    if video is not None:
+        _video(video, skel, steps, spec, frame_poses(skel, steps, spec, camera_view, panel), fps)
+
+
+def _check_request(
+    input_path: Path,
+    sheet: Path | None,
+    rig: Path | None,
+    cols: int | None,
+    video: Path | None,
+    fps: float,
+    force: bool,
+) -> str:
+    """Every option checked before any file is read; returns the input kind."""
+    kind = input_kind(input_path)
+    if sheet is None and video is None:
+        raise RenderError("nothing to write: give -o SHEET.png and/or --video OUT.mp4")
+    if rig is None:
+        raise RenderError(f"{input_path}: --rig RIG is required (it gives the bones' shapes)")
+    if sheet is not None and sheet.suffix.lower() != ".png":
+        raise RenderError(f"-o: expected a .png file name, got {sheet.name!r}")
+    if cols is not None and cols < 1:
+        raise RenderError(f"--cols: expected a positive number of columns, got {cols}")
+    if video is not None and kind != "trace":
+        raise RenderError(f"--video: expected a trace .mcap INPUT, got {input_path.name!r}")
+    if not 1.0 <= fps <= 240.0:
+        raise RenderError(f"--fps: expected 1 … 240 frames per second, got {fps:g}")
+    for out in (sheet, video):
+        if out is not None and not force and (out.exists() or out.is_symlink()):
+            raise OutputError(f"{out} exists: pass --force to overwrite")
+    return kind
+
+
+def _mkdir(path: Path) -> None:
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"{path.parent}: cannot create directory: {exc.strerror}") from exc
+
+
+def _video(path: Path, skel, steps, spec, framing, fps: float) -> None:
+    from puppetcli.render_video import frame_indices, write_video
+
+    _mkdir(path)
+    total = len(frame_indices([p.time for p in steps], fps))
+    with _progress(total) as tick:
+        n = write_video(path, skel, steps, spec, framing, fps, tick)
+    click.echo(f"{path}: {n} frames at {fps:g} fps ({len(steps)} recorded steps)")
+
+
+@contextlib.contextmanager
+def _progress(frames: int):
+    """A progress callback: a bar on a terminal's stderr, nothing otherwise."""
+    if not sys.stderr.isatty():
+        yield None
+        return
+    with click.progressbar(length=max(1, frames), label="rendering", file=sys.stderr) as bar:
+        yield lambda: bar.update(1)

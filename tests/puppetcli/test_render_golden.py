@@ -1,0 +1,81 @@
+"""Golden pictures: one pose of rigs/doll.yaml in each named view, 96 × 96 px.
+
+The references in ``golden/render_<view>.png`` were made on purpose and looked
+at (the doll with its left arm raised 40°, the side table, the ground grid and
+the feet's contact shadows; front and side differ as the views say).
+Regenerate them only on purpose::
+
+    PUPPETCLI_REGEN_GOLDEN=1 python -m pytest tests/puppetcli/test_render_golden.py
+
+then look at them again.  A picture matches when the mean absolute difference
+is below ``MEAN_TOLERANCE`` grey levels and fewer than ``OUTLIER_SHARE`` of its
+pixels differ by more than ``OUTLIER_LEVEL`` in any channel, which absorbs
+anti-aliasing differences between OpenCV builds but not a moved limb.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from test_render_fixtures import doll, key
+
+from puppetcli.render import frame_poses, poses_from_keys, render_pose
+
+GOLDEN = Path(__file__).resolve().parent / "golden"
+REGENERATE = os.environ.get("PUPPETCLI_REGEN_GOLDEN") == "1"
+VIEWS = ("front", "side", "top", "iso")
+SIZE = (96, 96)
+MEAN_TOLERANCE = 3.0
+OUTLIER_LEVEL = 32
+OUTLIER_SHARE = 0.01
+
+
+def picture(view: str) -> np.ndarray:
+    """The golden scene: the doll with props, left arm raised 40°, labelled, at t = 1.25 s."""
+    spec, skel = doll(props=True)
+    poses = poses_from_keys(skel, [key(skel, 40.0, 1.25, "golden")])
+    return render_pose(skel, poses[0], spec, frame_poses(skel, poses, spec, view, SIZE))
+
+
+def difference(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
+    """(mean absolute difference in grey levels, share of pixels off by > OUTLIER_LEVEL)."""
+    assert a.shape == b.shape
+    diff = np.abs(a.astype(int) - b.astype(int))
+    return float(diff.mean()), float((diff.max(axis=2) > OUTLIER_LEVEL).mean())
+
+
+def matches(a: np.ndarray, b: np.ndarray) -> bool:
+    mean, share = difference(a, b)
+    return mean < MEAN_TOLERANCE and share < OUTLIER_SHARE
+
+
+@pytest.mark.parametrize("view", VIEWS)
+def test_matches_golden(view: str) -> None:
+    path = GOLDEN / f"render_{view}.png"
+    img = picture(view)
+    if REGENERATE:
+        GOLDEN.mkdir(exist_ok=True)
+        cv2.imwrite(str(path), img)
+        pytest.skip(f"regenerated {path.name}: look at it before committing")
+    golden = cv2.imread(str(path), cv2.IMREAD_COLOR)
+    assert golden is not None, f"missing {path}; see this module's docstring"
+    mean, share = difference(img, golden)
+    assert mean < MEAN_TOLERANCE and share < OUTLIER_SHARE, (view, mean, share)
+
+
+@pytest.mark.skipif(REGENERATE, reason="regenerating")
+def test_the_comparison_tells_views_and_poses_apart() -> None:
+    """Each golden matches its own view only, and not the same view with the arm moved 10°."""
+    goldens = {v: cv2.imread(str(GOLDEN / f"render_{v}.png"), cv2.IMREAD_COLOR) for v in VIEWS}
+    for v in VIEWS:
+        for w in VIEWS:
+            assert matches(picture(v), goldens[w]) == (v == w), (v, w)
+    spec, skel = doll(props=True)
+    reference = poses_from_keys(skel, [key(skel, 40.0, 1.25, "golden")])
+    moved = poses_from_keys(skel, [key(skel, 50.0, 1.25, "golden")])
+    framing = frame_poses(skel, reference, spec, "front", SIZE)
+    assert not matches(render_pose(skel, moved[0], spec, framing), goldens["front"])
