@@ -17,13 +17,19 @@ COMMANDS = {
     "validate": "puppetcli.commands.validate",
     "pose": "puppetcli.commands.pose",
     "bench": "puppetcli.commands.bench",
+    "stress": "puppetcli.commands.stress",
     "render": "puppetcli.commands.render",
+    "rig": "puppetcli.commands.rig",
+    "convert": "puppetcli.commands.convert",
 }
 HELP = {
     "validate": "Check a rig file and summarise what its simulation needs.",
     "pose": "Run a manipulation script on a rig: keyframes and a trace.",
     "bench": "Measure steps per second of the solvers on example scenes.",
+    "stress": "Check that extreme rigs and inputs simulate stably.",
     "render": "Draw poses: a contact sheet of keys, or a video of a trace.",
+    "rig": "Make rigs from other formats (rig from-bvh FILE.bvh -o RIG.yaml).",
+    "convert": "Run a manipulation script and write the motion as BVH.",
 }
 
 

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import click
 
+from puppetcli.bvh_write import write_keys_bvh
 from puppetcli.errors import ScriptError
 from puppetcli.keyframes import write_keyframes
 from puppetcli.outputs import prepare_outdir
@@ -19,7 +20,7 @@ from puppetcli.script import load_script
 from puppetcli.skeleton import Skeleton
 from solver.model import build_model
 
-OUTPUTS = ["keyframes.json", "trace.mcap", "sheet.png", "keys"]
+OUTPUTS = ["keyframes.json", "keyframes.bvh", "trace.mcap", "sheet.png", "keys"]
 MAX_STEPS = 10_000_000  # a run longer than this is a mistake in the script (h or a duration)
 
 
@@ -46,6 +47,20 @@ MAX_STEPS = 10_000_000  # a run longer than this is a mistake in the script (h o
 @click.option("--no-trace", is_flag=True, help="Do not write trace.mcap.")
 @click.option("--no-render", is_flag=True, help="Do not draw keys/NNN.png and sheet.png.")
 @click.option(
+    "--order",
+    default="ZXY",
+    show_default=True,
+    type=click.Choice(["ZXY", "ZYX", "XYZ", "XZY", "YXZ", "YZX"]),
+    help="Rotation channel order of keyframes.bvh.",
+)
+@click.option(
+    "--fps",
+    type=click.FloatRange(min=0.0, min_open=True),
+    default=30.0,
+    show_default=True,
+    help="Frame Time of keyframes.bvh is 1/fps (one frame per key).",
+)
+@click.option(
     "--view",
     default="iso",
     show_default=True,
@@ -59,12 +74,15 @@ def command(
     trace_every: int,
     no_trace: bool,
     no_render: bool,
+    order: str,
+    fps: float,
     view: str,
 ) -> None:
-    """Run a manipulation script on a rig: keyframes, a trace and pictures.
+    """Run a manipulation script on a rig: keyframes, BVH, a trace and pictures.
 
-    Writes OUTDIR/keyframes.json, OUTDIR/trace.mcap, OUTDIR/keys/NNN.png (one
-    picture per key) and OUTDIR/sheet.png (all keys, one framing); existing files
+    Writes OUTDIR/keyframes.json, OUTDIR/keyframes.bvh (one frame per key),
+    OUTDIR/trace.mcap, OUTDIR/keys/NNN.png (one picture per key) and
+    OUTDIR/sheet.png (all keys, one framing); existing files
     are kept unless --force.  If the simulation fails, the keys taken and the trace
     steps written before the failure are still saved, and the exit status is 1.
     Failed `expect` lines are printed and also end with exit status 1.
@@ -73,10 +91,15 @@ def command(
     plan = load_script(script, spec)
     model = script_model(build_model(spec), plan)
     _check_length(script, plan, model.options.h)
-    outputs = [name for name in OUTPUTS if not (no_trace and name == "trace.mcap")]
-    prepare_outdir(outdir, outputs if not no_render else outputs[:2], force)
+    skipped = {"trace.mcap"} if no_trace else set()
+    skipped |= {"sheet.png", "keys"} if no_render else set()
+    prepare_outdir(outdir, [name for name in OUTPUTS if name not in skipped], force)
     result = _run(model, plan, outdir, trace_every, no_trace)
     write_keyframes(outdir / "keyframes.json", model.name, result.keys)
+    if len(result.keys):
+        write_keys_bvh(
+            outdir / "keyframes.bvh", Skeleton.from_spec(spec), list(result.keys), order, fps=fps
+        )
     if not no_render and len(result.keys):
         render_keys(outdir, Skeleton.from_spec(spec), list(result.keys), spec, view=view)
     _report(result, model.options.h)

@@ -25,7 +25,7 @@ from puppetcli.cli import cli
 ROOT = Path(__file__).resolve().parents[2]
 DOLL = ROOT / "rigs" / "doll.yaml"
 ONE_BONE = ROOT / "rigs" / "one_bone.yaml"
-OUTPUTS = ("keyframes.json", "trace.mcap")
+OUTPUTS = ("keyframes.json", "keyframes.bvh", "trace.mcap")
 
 RIG = """\
 name: tiny

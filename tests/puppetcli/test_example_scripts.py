@@ -6,6 +6,7 @@ from pathlib import Path
 
 import pytest
 import yaml
+from bvh import Bvh
 from click.testing import CliRunner
 
 from puppetcli.cli import cli
@@ -31,6 +32,10 @@ def test_example_script_passes_its_expectations(name, tmp_path):
         assert f"expectations: {expects} of {expects} passed" in result.stdout
     _, taken = read_keyframes(tmp_path / "keyframes.json")
     assert len(taken) == keys
+    motion = Bvh((tmp_path / "keyframes.bvh").read_text())  # an independent parser
+    assert motion.nframes == keys
+    assert set(motion.get_joints_names()) == set(taken[0].bones)
+    assert len(list((tmp_path / "keys").glob("*.png"))) == keys
     trace = read_trace(tmp_path / "trace.mcap")
     assert len(trace["/puppet/keyframe"]) == keys
     if name != "arm_push":  # scripts that use the pointer record it

@@ -1,0 +1,119 @@
+"""``puppetcli convert INPUT -o OUT.bvh --rig RIG``: run a script, write the motion as BVH."""
+
+from __future__ import annotations
+
+import contextlib
+import sys
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import click
+
+from puppetcli.bvh import ORDERS
+from puppetcli.bvh_write import FrameSampler, write_keys_bvh
+from puppetcli.errors import ScriptError, SessionError
+from puppetcli.outputs import OutputError
+from puppetcli.rigfile import load_rig
+from puppetcli.runner import Runner, script_model
+from puppetcli.script import load_script
+from puppetcli.skeleton import Skeleton
+from solver.model import Model, build_model
+from solver.state import State
+
+MAX_STEPS = 10_000_000  # as `pose`: a run longer than this is a mistake in the script
+KEYS_FPS = 30.0  # Frame Time of a BVH of keys when no --fps is given
+
+
+@click.command("convert")
+@click.argument("source", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option(
+    "-o", "--out", required=True, type=click.Path(dir_okay=False, path_type=Path),
+    help="The BVH file to write.",
+)  # fmt: skip
+@click.option(
+    "--rig", "rig", required=True,
+    type=click.Path(exists=True, dir_okay=False, path_type=Path), help="The rig to pose.",
+)  # fmt: skip
+@click.option(
+    "--fps", type=click.FloatRange(min=0.0, min_open=True), default=None,
+    help="Write the whole motion sampled at this rate [default: one frame per key, at 30 fps].",
+)  # fmt: skip
+@click.option(
+    "--order", type=click.Choice(ORDERS, case_sensitive=False), default="ZXY",
+    show_default=True, help="Rotation channel order of every joint.",
+)  # fmt: skip
+@click.option(
+    "--scale", type=click.FloatRange(min=0.0, min_open=True), default=1.0, show_default=True,
+    help="File units per metre (100 for centimetres).",
+)  # fmt: skip
+@click.option("--force", is_flag=True, help="Overwrite OUT.bvh if it exists.")
+def command(
+    source: Path, out: Path, rig: Path, fps: float | None, order: str, scale: float, force: bool
+) -> None:
+    """Run the manipulation script SOURCE (.yaml) on RIG and write its motion as BVH.
+
+    Without --fps each key of the script is one frame; with --fps the whole
+    run is sampled at that rate.  If the simulation fails, the frames before
+    the failure are still written and the exit status is 1.  Recorded sessions
+    (.mcap) are not supported yet.
+    """
+    if source.suffix.lower() == ".mcap":
+        raise SessionError(
+            f"{source}: expected a manipulation script (.yaml), got a recorded session "
+            "(.mcap): sessions are not supported yet"
+        )
+    if (out.exists() or out.is_symlink()) and not force:
+        raise OutputError(f"{out} exists: pass --force to overwrite")
+    spec = load_rig(rig)
+    plan = load_script(source, spec)
+    model = script_model(build_model(spec), plan)
+    if _total_steps(model, plan) > MAX_STEPS:
+        raise ScriptError(
+            f"{source}: expected at most {MAX_STEPS:,} steps, got {_total_steps(model, plan):,} "
+            f"(duration over step h = {model.options.h:g} s)"
+        )
+    runner = Runner(model, plan)
+    sampler = FrameSampler(model, fps, runner.state) if fps is not None else None
+    with _progress(_total_steps(model, plan)) as tick:
+        runner.on_step = _chain(sampler, tick)
+        result = runner.run()
+    frames = sampler.frames if sampler is not None else list(result.keys)
+    if not frames:
+        raise ScriptError(f"{source}: expected at least one 'key' action (or --fps), got none")
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"{out.parent}: cannot create directory: {exc.strerror}") from exc
+    write_keys_bvh(out, Skeleton.from_spec(spec), frames, order.upper(), scale, fps or KEYS_FPS)
+    what = f"{len(frames)} frames at {fps:g} fps" if fps else f"{len(frames)} keys"
+    click.echo(f"wrote {out}: {what}, {result.state.time:.3f} s simulated, order {order.upper()}")
+    if result.error is not None:
+        raise result.error
+
+
+def _total_steps(model: Model, plan) -> int:
+    timeline = sum(getattr(a, "duration", 0.0) for a in plan.actions)
+    return round(max(plan.duration or 0.0, timeline) / model.options.h)
+
+
+def _chain(*callbacks: Callable[[State], None] | None) -> Callable[[State], None] | None:
+    """One callback calling every non-None one in turn (None if there are none)."""
+    live = [c for c in callbacks if c is not None]
+    if not live:
+        return None
+
+    def call_all(state: State) -> None:
+        for callback in live:
+            callback(state)
+
+    return call_all
+
+
+@contextlib.contextmanager
+def _progress(steps: int) -> Iterator[Callable[[State], None] | None]:
+    """A progress callback: a bar on a terminal's stderr, nothing otherwise."""
+    if not sys.stderr.isatty():
+        yield None
+        return
+    with click.progressbar(length=max(1, steps), label="simulating", file=sys.stderr) as bar:
+        yield lambda state: bar.update(1)

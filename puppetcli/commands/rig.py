@@ -1,0 +1,69 @@
+"""``puppetcli rig from-bvh FILE.bvh -o RIG.yaml``: make a rig from a BVH skeleton."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from puppetcli.bvh_read import read_bvh
+from puppetcli.bvh_rig import auto_scale, check_frame, describe_scale, rig_text_from_bvh
+from puppetcli.outputs import OutputError, write_text_atomic
+from puppetcli.rigfile import rig_from_text
+from solver.model import build_model
+
+
+@click.group("rig")
+def command() -> None:
+    """Make rigs from other formats."""
+
+
+@command.command("from-bvh")
+@click.argument("bvh_file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option(
+    "-o",
+    "--out",
+    "out",
+    required=True,
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="The rig file to write (YAML).",
+)
+@click.option(
+    "--frame",
+    type=click.IntRange(min=0),
+    default=None,
+    help="Take the rest pose from this frame (0 = the first) instead of the OFFSETs.",
+)
+@click.option(
+    "--scale",
+    type=click.FloatRange(min=0.0, min_open=True),
+    default=None,
+    help="Metres per file unit [default: 0.01 if the skeleton is taller than 10 units, else 1].",
+)
+@click.option("--force", is_flag=True, help="Overwrite RIG.yaml if it exists.")
+def from_bvh(
+    bvh_file: Path, out: Path, frame: int | None, scale: float | None, force: bool
+) -> None:
+    """Turn the skeleton of BVH_FILE into a rig that `puppetcli validate` accepts.
+
+    Every joint becomes a capsule bone (a small sphere where a bone has no
+    length), sized from the skeleton, with masses from a density of water, the
+    example doll's joint settings (strengthened where a joint carries a heavy
+    subtree) and a fixed root.  See docs/bvh.md.
+    """
+    if (out.exists() or out.is_symlink()) and not force:
+        raise OutputError(f"{out} exists: pass --force to overwrite")
+    bvh = read_bvh(bvh_file)
+    check_frame(bvh, frame)
+    if scale is None:
+        scale, height = auto_scale(bvh, frame)
+        click.echo(f"note: {describe_scale(scale, height)}", err=True)
+    pose = f"frame {frame}" if frame is not None else "its OFFSETs (rest pose)"
+    note = f"Made by `puppetcli rig from-bvh` from {bvh_file.name}, {pose}, scale {scale:g} m/unit."
+    text = rig_text_from_bvh(bvh, bvh_file.stem, scale, frame, note)
+    model = build_model(rig_from_text(text, str(out)))
+    write_text_atomic(out, text)
+    click.echo(
+        f"wrote {out}: {len(model.bone_names)} bones from {bvh_file} "
+        f"({pose}, scale {scale:g}), {model.body_mass.sum():.3f} kg"
+    )
