@@ -61,6 +61,20 @@ MAX_STEPS = 10_000_000  # a run longer than this is a mistake in the script (h o
     help="Frame Time of keyframes.bvh is 1/fps (one frame per key).",
 )
 @click.option(
+    "--interpolate",
+    type=click.Choice(["none", "slerp"]),
+    default="none",
+    show_default=True,
+    help="keyframes.bvh: 'slerp' samples a timed motion at --fps between the keys.",
+)
+@click.option(
+    "--scale",
+    type=click.FloatRange(min=0.0, min_open=True),
+    default=1.0,
+    show_default=True,
+    help="keyframes.bvh: length unit factor (100 = centimetres).",
+)
+@click.option(
     "--view",
     default="iso",
     show_default=True,
@@ -76,6 +90,8 @@ def command(
     no_render: bool,
     order: str,
     fps: float,
+    interpolate: str,
+    scale: float,
     view: str,
 ) -> None:
     """Run a manipulation script on a rig: keyframes, BVH, a trace and pictures.
@@ -98,8 +114,9 @@ def command(
     write_keyframes(outdir / "keyframes.json", model.name, result.keys)
     if len(result.keys):
         write_keys_bvh(
-            outdir / "keyframes.bvh", Skeleton.from_spec(spec), list(result.keys), order, fps=fps
-        )
+            outdir / "keyframes.bvh", Skeleton.from_spec(spec), list(result.keys), order,
+            scale=scale, fps=fps, interpolate=None if interpolate == "none" else interpolate,
+        )  # fmt: skip
     if not no_render and len(result.keys):
         render_keys(outdir, Skeleton.from_spec(spec), list(result.keys), spec, view=view)
     _report(result, model.options.h)
