@@ -58,7 +58,7 @@ def separating_axis(
     axes = np.concatenate((ax_a, ax_b, cross), axis=1)
     length = np.linalg.norm(axes, axis=-1)
     axes = axes / np.maximum(length, 1e-300)[..., None]
-    t = dot(cb - ca, axes)
+    t = dot((cb - ca)[:, None, :], axes)  # (k,1,3) against (k,15,3)
     reach_a = np.einsum("kli,ki->kl", np.abs(np.einsum("kla,kia->kli", axes, ax_a)), ha)
     reach_b = np.einsum("kli,ki->kl", np.abs(np.einsum("kla,kia->kli", axes, ax_b)), hb)
     sep = np.where(length > 1e-6, np.abs(t) - reach_a - reach_b, -np.inf)

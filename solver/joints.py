@@ -87,7 +87,9 @@ def arc_offset(omega: np.ndarray, r: np.ndarray, h: float) -> np.ndarray:
 def anchor_rows(model: Model, fr: JointFrames, h: float, omega: np.ndarray | None = None) -> Rows:
     """Three hard rows per joint keeping its two anchors together.
 
-    omega (nb,3): angular velocities for the arc correction (None: no correction).
+    omega (nb,3): angular velocities for the arc correction (None: no correction): the
+    last step's solved ones, not the unconstrained free velocities, which carry a
+    large external torque's whole effect before the joints share it.
     """
     nj = model.njoint
     gap = model.options.joint_erp * (fr.anchor_child - fr.anchor_parent)

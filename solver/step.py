@@ -52,7 +52,7 @@ def build_rows(
     inp = inp or StepInput()
     h = model.options.h
     fr = joint_frames(model, state.body_pos, state.body_quat, body_rot)
-    blocks = [anchor_rows(model, fr, h, vel_free[:, 3:])]
+    blocks = [anchor_rows(model, fr, h, state.body_omega)]
     rheo_joint = np.zeros(0, dtype=np.int64)
     if model.joint_rheology.any():
         block, rheo_joint = rheology_rows(model, state, fr, h)
@@ -112,10 +112,10 @@ def solve(model: Model, state: State, rows: Rows, resp: tuple, vel_free: np.ndar
             raise ValueError(
                 "the direct solver handles two-sided rows only (no contacts or limits)"
             )
-        lam, residual = direct_solve(rows, resp, vel_free)
-        if np.all((lam >= rows.lo) & (lam <= rows.hi)):
+        lam, residual, ok = direct_solve(rows, resp, vel_free)
+        if ok:
             return lam, _apply(rows, resp, vel_free, lam), 1, residual, "direct"
-        lam0 = np.clip(lam, rows.lo, rows.hi)  # a force limit is hit: finish with PGS
+        lam0 = lam  # the active set did not settle: finish with PGS from there
     if method == "reference":
         q, c = dense_system(rows, resp, vel_free)
         lam = reference_solve(q, c, rows.lo, rows.hi, rows.fric_of, rows.mu)

@@ -857,3 +857,23 @@ def test_friction_is_the_geometric_mean():
     for key, f in zip(c.key, c.friction, strict=True):
         a, b = SCENE_PAIRS[key // 16]
         assert f == pytest.approx(np.sqrt(mu[a] * mu[b]), rel=1e-15)
+
+
+@pytest.mark.parametrize("k", [2, 3, 15])
+def test_box_pairs_in_one_batch_match_one_at_a_time(k):
+    # Regression: the separating-axis test broadcast (k,3) against (k,15,3), which
+    # raised for most k and was silently wrong for k = 15.
+    from solver.collide_boxbox import separating_axis
+
+    rng = np.random.default_rng(k)
+    ca, cb = rng.normal(size=(k, 3)), rng.normal(size=(k, 3))
+    ra = np.stack([Rotation.random(random_state=i).as_matrix() for i in range(k)])
+    rb = np.stack([Rotation.random(random_state=100 + i).as_matrix() for i in range(k)])
+    ha, hb = rng.uniform(0.1, 0.5, (k, 3)), rng.uniform(0.1, 0.5, (k, 3))
+    batch = separating_axis(ca, ra, ha, cb, rb, hb)
+    for i in range(k):
+        one = separating_axis(
+            ca[i : i + 1], ra[i : i + 1], ha[i : i + 1], cb[i : i + 1], rb[i : i + 1], hb[i : i + 1]
+        )
+        for got, want in zip(batch, one, strict=True):
+            assert np.allclose(got[i], want[0])

@@ -10,6 +10,7 @@ from rigbuild import chain, rheology
 
 from solver import quat
 from solver.direct import direct_solve
+from solver.grip import Pointer, make_coupling
 from solver.integrate import free_velocity
 from solver.model import build_model
 from solver.pgs import pgs_solve
@@ -20,12 +21,13 @@ from solver.state import StepInput, initial_state
 from solver.step import build_rows, step, warm_start
 
 
-def problem(model, state):
+def problem(model, state, inp=None):
     """The row table of the next step and what a solver needs."""
+    inp = inp or StepInput()
     rot = quat.matrix(state.body_quat)
     inv_i = world_inverse_inertia(model.body_inv_inertia, rot)
-    vel_free = free_velocity(model, state, StepInput(), inv_i)
-    rows, ncontact, _ = build_rows(model, state, rot, vel_free)
+    vel_free = free_velocity(model, state, inp, inv_i)
+    rows, ncontact, _ = build_rows(model, state, rot, vel_free, inp)
     resp = row_response(rows, model.body_inv_mass, inv_i, model.options.h)
     rows = regularize(rows, resp, model.options.regularization)
     return rows, resp, vel_free, ncontact
@@ -147,7 +149,8 @@ def test_direct_equals_reference_on_equality_only_scenes(seed):
         state, _ = step(model, state)
     rows, resp, vel_free, _ = problem(model, state)
     assert rows.equality_only
-    lam, residual = direct_solve(rows, resp, vel_free)
+    lam, residual, ok = direct_solve(rows, resp, vel_free)
+    assert ok
     q, c = dense_system(rows, resp, vel_free)
     lam_ref = reference_solve(q, c, rows.lo, rows.hi, rows.fric_of, rows.mu)
     assert np.abs(lam - lam_ref).max() <= 1e-7 * max(1.0, np.abs(lam_ref).max())
@@ -177,3 +180,27 @@ def test_warm_start_needs_fewer_iterations():
     cold = sweeps_to_reach(model, False, 1e-4)
     warm = sweeps_to_reach(model, True, 1e-4)
     assert warm < 0.5 * cold, (warm, cold)
+
+
+@pytest.mark.parametrize("limit", [0.5, 2.0, 1e6])
+def test_direct_solve_with_a_saturated_grip_equals_the_reference(limit):
+    # A grip pulling a chain's tip 30 cm away: with a low force limit the coupling
+    # rows saturate; the active-set direct solve must match the exact box-QP.
+    model = build_model(chain(5, 0.005, rheo=rheology(2.0, 0.5, 3.0)))
+    state = initial_state(model)
+    tip = np.array([0.5, 1.0, 0.0])
+    ptr = Pointer(tip + [0.0, 0.3, 0.0], quat.IDENTITY, np.zeros(3), np.zeros(3))
+    here = Pointer(tip, quat.IDENTITY, np.zeros(3), np.zeros(3))
+    coupling = make_coupling(
+        state, here, 4, tip, stiffness=2000.0, damping=40.0, rot_stiffness=50.0,
+        rot_damping=2.0, force_limit=limit, torque_limit=limit,
+    )  # fmt: skip
+    rows, resp, vel_free, _ = problem(model, state, StepInput(pointer=ptr, coupling=coupling))
+    assert rows.bilateral
+    lam, _, ok = direct_solve(rows, resp, vel_free)
+    q, c = dense_system(rows, resp, vel_free)
+    lam_ref = reference_solve(q, c, rows.lo, rows.hi, rows.fric_of, rows.mu)
+    assert ok
+    assert np.abs(lam - lam_ref).max() <= 1e-6 * max(1.0, np.abs(lam_ref).max())
+    saturated = np.isclose(np.abs(lam), limit)
+    assert saturated.any() == (limit < 100.0)

@@ -1,0 +1,49 @@
+"""Keep numba's on-disk cache of the compiled step consistent with its sources.
+
+numba invalidates a cached function only when *its own* file changes; the step kernel
+inlines functions from every module of this package and from ``solver.pgs`` and
+``solver.rows`` (the PGS kernel, the row kinds and key layout), so an edit there would
+leave a stale kernel in the cache.  ``ensure_fresh_cache`` fingerprints all of those
+sources and, when the fingerprint changed, deletes this package's cached kernels
+(``__pycache__/*.nbi``/``*.nbc``) so numba recompiles them.  Cache locations other than
+``__pycache__`` (NUMBA_CACHE_DIR) are left to the user.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+SOURCES = (HERE.parent / "pgs.py", HERE.parent / "rows.py")
+
+
+def fingerprint() -> str:
+    """SHA-256 over the names and contents of every source the kernels are built from."""
+    digest = hashlib.sha256()
+    for path in sorted(HERE.glob("*.py")) + list(SOURCES):
+        digest.update(path.name.encode())
+        digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+def ensure_fresh_cache() -> None:
+    """Drop this package's numba cache files when any kernel source changed."""
+    cache = HERE / "__pycache__"
+    stamp = cache / "kernels.stamp"
+    current = fingerprint()
+    try:
+        if stamp.read_text() == current:
+            return
+    except OSError:
+        pass
+    try:
+        cache.mkdir(exist_ok=True)
+        for path in list(cache.glob("*.nbi")) + list(cache.glob("*.nbc")):
+            path.unlink(missing_ok=True)
+        tmp = cache / f"kernels.stamp.{os.getpid()}"
+        tmp.write_text(current)
+        tmp.replace(stamp)
+    except OSError:
+        pass  # a read-only install: numba then caches elsewhere, or not at all

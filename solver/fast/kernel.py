@@ -1,0 +1,310 @@
+"""The compiled step: ``solver.step.step``'s pipeline in one call (DESIGN §3, digest §4.3).
+
+    v_free  = v + h (g + F/m),  ω_free = ω + h I_w⁻¹ τ
+    rows    = anchor | rheology | limits | contacts (normal, friction) | grip or pointer
+    lam     = direct (tree elimination; rows leaving their box are pinned at the bound
+              and the rest re-solved, PGS finishes if that does not settle) when every
+              row is two-sided; else PGS warm-started with last step's λ by row key
+    v, pose = integrate (momentum form), project joints (only above 0.1 mm)
+    q_sf    = rheology update with the solved velocity; warm keys sorted for the next step
+
+Packed arguments (see ``solver.fast.pack``): m model arrays, g geometry, tree the
+elimination forest, ws/pws workspaces, opt/iopt options, st state arrays, inp input.
+Status ≠ 0 hands the step back to the numpy implementation (box–box contact, a
+monitor failure that must raise, a degenerate direct system).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from solver.fast.contacts import (
+    collide_pointer,
+    collide_scene,
+    contact_rows,
+    coupling_rows,
+    is_touch_row,
+    world_shapes,
+)
+from solver.fast.kin import congruence, matvec, qmatrix, quat_at
+from solver.fast.post import (
+    apply,
+    apply_rows,
+    integrate,
+    project,
+    response,
+    rheology_update,
+    state_ok,
+)
+from solver.fast.rows import ZERO, anchor_rows, limit_rows, rheology_rows
+from solver.fast.tree import node_rows, row_velocity, tree_solve
+from solver.pgs import pgs_solve
+from solver.rows import KIND_GRIP
+
+OK, FALLBACK = 0, 1
+SOLVER_DIRECT, SOLVER_PGS = 0, 1
+METHOD_AUTO, METHOD_PGS, METHOD_DIRECT = 0, 1, 2
+MODE_NONE, MODE_GRIP, MODE_TOUCH = 0, 1, 2
+DIRECT_ROUNDS = 8  # solver.direct.direct_solve's rounds
+
+
+@njit(cache=True, error_model="numpy")
+def free_velocity(m, opt, st, inv_i, inp, out):
+    """(nb,6) velocities after gravity and external loads, before constraints."""
+    vel, omega = st[2], st[3]
+    force, torque, ivec = inp[0], inp[1], inp[4]
+    inv_mass, h = m[16], opt[0]
+    for b in range(len(vel)):
+        tau = matvec(inv_i, b, (torque[b, 0], torque[b, 1], torque[b, 2]))
+        for k in range(3):
+            acc = opt[12 + k] if inv_mass[b] > 0.0 else 0.0
+            if ivec[3]:
+                acc = acc + force[b, k] * inv_mass[b]
+            out[b, k] = vel[b, k] + h * acc
+            out[b, 3 + k] = omega[b, k] + h * tau[k] if ivec[4] else omega[b, k]
+
+
+@njit(cache=True, error_model="numpy")
+def build_rows(m, g, opt, iopt, st, rot, vel_free, inp, ws):
+    """Fill the row table; returns (rows, scene contacts, first grip row, grip rows), or
+    rows = −1 when a box–box pair is within reach."""
+    pos, quat = st[0], st[1]
+    rw, rheo_joint, cb, centre, srot = ws[0], ws[3], ws[4], ws[8], ws[9]
+    pvec, cvec, ivec = inp[2], inp[3], inp[4]
+    h = opt[0]
+    n = anchor_rows(m, pos, rot, st[3], h, opt[1], True, rw, 0)
+    if iopt[3]:
+        n = rheology_rows(m, quat, rot, h, st[4], st[5], st[6], rheo_joint, rw, n)
+    if iopt[4]:
+        n = limit_rows(m, quat, rot, h, opt[1], opt[5], rw, n)
+    ncontact = 0
+    if iopt[5] or ivec[0] == MODE_TOUCH:
+        world_shapes(g, pos, quat, centre, srot)
+    if iopt[5]:
+        ncontact = collide_scene(g, centre, srot, opt[4], cb)
+        if ncontact < 0:
+            return -1, 0, 0, 0
+        n = contact_rows(cb, 0, ncontact, pos, vel_free, ZERO, h, opt[2], opt[3], rw, n)
+    if ivec[0] == MODE_GRIP:
+        ptr = (
+            (pvec[0], pvec[1], pvec[2]),
+            (pvec[3], pvec[4], pvec[5], pvec[6]),
+            (pvec[7], pvec[8], pvec[9]),
+            (pvec[10], pvec[11], pvec[12]),
+        )
+        cpl = (
+            (cvec[0], cvec[1], cvec[2]),
+            (cvec[3], cvec[4], cvec[5]),
+            (cvec[6], cvec[7], cvec[8], cvec[9]),
+            cvec[10],
+            cvec[11],
+            cvec[12],
+            cvec[13],
+            cvec[14],
+            cvec[15],
+        )
+        grip0 = n
+        n = coupling_rows(pos, quat, h, ptr, cpl, ivec[1], ivec[2], rw, n)
+        return n, ncontact, grip0, n - grip0
+    if ivec[0] == MODE_TOUCH:
+        u = (pvec[7], pvec[8], pvec[9])
+        pc = (pvec[0] - h * u[0], pvec[1] - h * u[1], pvec[2] - h * u[2])
+        end = collide_pointer(g, centre, srot, pc, pvec[13], opt[4], cb, ncontact)
+        n = contact_rows(cb, ncontact, end, pos, vel_free, u, h, opt[2], opt[3], rw, n)
+    return n, ncontact, n, 0
+
+
+@njit(cache=True, error_model="numpy")
+def regularize(rw, n, resp_a, resp_b, eps):
+    """comp ← ε·A_ii on every row without compliance of its own."""
+    if eps <= 0.0:
+        return
+    for i in range(n):
+        if not rw[6][i] > 0.0:
+            d = 0.0
+            for k in range(6):
+                d += rw[2][i, k] * resp_a[i, k] + rw[3][i, k] * resp_b[i, k]
+            rw[6][i] = eps * d
+
+
+@njit(cache=True, error_model="numpy")
+def warm_start(opt, iopt, st, rw, n):
+    """Last step's λ of rows with the same key (sorted keys, binary search) × factor."""
+    lam = np.zeros(n)
+    keys, values = st[8], st[9]
+    if not iopt[2] or len(keys) == 0:
+        return lam
+    for i in range(n):
+        at = min(np.searchsorted(keys, rw[10][i]), len(keys) - 1)
+        if keys[at] == rw[10][i]:
+            lam[i] = opt[11] * values[at]
+    return lam
+
+
+@njit(cache=True, error_model="numpy")
+def _tree_pass(m, tree, ws, opt, rw, vel_free, free_grip, ngrip, body, lam):
+    """λ of the joint rows and the free grip rows by the tree elimination (pinned rows'
+    forces are already in vel_free); False when the system is degenerate."""
+    order, parent, rheo_start, _, seq, rows, size, tw = tree
+    nb = len(vel_free)
+    node = nb + len(rheo_start)
+    nseq = 0
+    if ngrip:
+        seq[0], nseq = node, 1
+        parent[node] = body if m[16][body] > 0.0 else -1
+        size[node] = ngrip
+        rows[node, :ngrip] = free_grip[:ngrip]
+    for i in order:
+        seq[nseq] = i
+        nseq += 1
+        size[i] = node_rows(i, nb, rheo_start, rows[i])
+    return tree_solve(
+        seq, nseq, parent, nb, rw, vel_free, opt[0], m[15], ws[7], rows, size, tw, lam
+    )
+
+
+@njit(cache=True, error_model="numpy")
+def direct(m, tree, ws, opt, rw, n, vel_free, grip):
+    """(code, λ, v, residual) of the two-sided table (solver.direct.direct_solve): the tree
+    solve, then rows whose force leaves its box (the grip at its limit) are pinned at the
+    bound, their force folded into v_free, and the rest re-solved, ≤ DIRECT_ROUNDS times.
+    code 0: settled; 1: not settled (λ clipped, PGS finishes); 2: degenerate (fall back)."""
+    grip0, ngrip, body = grip
+    lo, hi = rw[4], rw[5]
+    free_grip = np.arange(grip0, grip0 + ngrip)
+    pinned = np.zeros(n, dtype=np.bool_)
+    lam = np.zeros(n)
+    vf = vel_free.copy()
+    if not _tree_pass(m, tree, ws, opt, rw, vf, free_grip, ngrip, body, lam):
+        return 2, lam, vf, 0.0
+    for _ in range(DIRECT_ROUNDS):
+        out = False
+        for i in range(n):
+            if lam[i] < lo[i] or lam[i] > hi[i]:
+                if not grip0 <= i < grip0 + ngrip:
+                    return 2, lam, vf, 0.0
+                out, pinned[i] = True, True
+        vel = vel_free.copy()
+        if not out:
+            apply(rw, n, ws[1], ws[2], lam, vel)
+            residual = 0.0
+            for i in range(n):
+                if not pinned[i]:
+                    r = row_velocity(rw, i, vel) + rw[6][i] * lam[i] + rw[7][i]
+                    residual = max(residual, abs(r))
+            return 0, lam, vel, residual
+        nfree = 0
+        for i in range(grip0, grip0 + ngrip):
+            if pinned[i]:
+                lam[i] = min(max(lam[i], lo[i]), hi[i])
+            else:
+                free_grip[nfree], nfree = i, nfree + 1
+        apply_rows(rw, pinned, ws[1], ws[2], lam, vel)
+        if not _tree_pass(m, tree, ws, opt, rw, vel, free_grip, nfree, body, lam):
+            return 2, lam, vel, 0.0
+    for i in range(n):
+        lam[i] = min(max(lam[i], lo[i]), hi[i])
+    return 1, lam, vel_free, 0.0
+
+
+@njit(cache=True, error_model="numpy")
+def solve(m, tree, ws, opt, iopt, st, n, vel_free, grip):
+    """(status, λ, v, iterations, residual, solver) as solver.step.solve."""
+    rw = ws[0]
+    bilateral = True
+    for i in range(n):
+        if not (rw[4][i] < 0.0 and rw[5][i] > 0.0 and rw[8][i] < 0):
+            bilateral = False
+    method = iopt[0]
+    lam0 = warm_start(opt, iopt, st, rw, n)
+    if method == METHOD_DIRECT or (method == METHOD_AUTO and bilateral):
+        if not bilateral:
+            return FALLBACK, lam0, vel_free, 0, 0.0, SOLVER_DIRECT
+        code, lam, vel, residual = direct(m, tree, ws, opt, rw, n, vel_free, grip)
+        if code == 2:
+            return FALLBACK, lam, vel, 0, 0.0, SOLVER_DIRECT
+        if code == 0:
+            return OK, lam, vel, 1, residual, SOLVER_DIRECT
+        lam0 = lam
+    lam, vel, sweeps, residual = pgs_solve(
+        rw[0][:n],
+        rw[1][:n],
+        rw[2][:n],
+        rw[3][:n],
+        ws[1][:n],
+        ws[2][:n],
+        rw[4][:n],
+        rw[5][:n],
+        rw[6][:n],
+        rw[7][:n],
+        rw[8][:n],
+        rw[9][:n],
+        vel_free,
+        lam0,
+        iopt[1],
+        1e-12,
+    )
+    return OK, lam, vel, sweeps, residual, SOLVER_PGS
+
+
+@njit(cache=True, error_model="numpy")
+def report(rw, n, lam, rep_f):
+    """rep_f[1:4] grip force, [4:7] grip torque, [7:10] pointer touch force."""
+    for i in range(n):
+        if rw[11][i] == KIND_GRIP:
+            slot = rw[10][i] & 0xF
+            rep_f[1 + slot] = lam[i]
+        elif is_touch_row(rw[10][i], rw[11][i]):
+            for k in range(3):
+                rep_f[7 + k] += rw[3][i, k] * lam[i]
+
+
+@njit(cache=True, error_model="numpy")
+def step_kernel(m, g, tree, ptree, ws, pws, opt, iopt, st, inp):
+    """One step.  Returns (status, (x, q, v, ω, q_sf, yielded, anchor, τ_avg, τ), warm keys,
+    warm λ, (rows, contacts, iterations, solver), (residual, grip f, grip τ, touch f))."""
+    pos, quat = st[0], st[1]
+    nb, nj = len(pos), len(m[0])
+    rw, rot, inv_i, inertia_w = ws[0], ws[5], ws[6], ws[7]
+    out = (
+        np.empty((nb, 3)),
+        np.empty((nb, 4)),
+        np.empty((nb, 3)),
+        np.empty((nb, 3)),
+        np.empty((nj, 3)),
+        np.zeros(nj, dtype=np.bool_),
+        np.empty((nj, 4)),
+        np.empty(nj),
+        np.empty((nj, 3)),
+    )
+    rep_i, rep_f = np.zeros(4, dtype=np.int64), np.zeros(10)
+    none_k, none_l = np.empty(0, dtype=np.int64), np.empty(0)
+    for b in range(nb):
+        qmatrix(quat_at(quat, b), rot, b)
+        congruence(rot, b, m[18], b, inv_i, b)
+        congruence(rot, b, m[17], b, inertia_w, b)
+    vel_free = np.empty((nb, 6))
+    free_velocity(m, opt, st, inv_i, inp, vel_free)
+    n, ncontact, grip0, ngrip = build_rows(m, g, opt, iopt, st, rot, vel_free, inp, ws)
+    if n < 0:
+        return FALLBACK, out, none_k, none_l, rep_i, rep_f
+    response(rw, n, m[16], inv_i, opt[0], ws[1], ws[2])
+    regularize(rw, n, ws[1], ws[2], opt[6])
+    grip = (grip0, ngrip, inp[4][1])
+    status, lam, vel, iters, residual, used = solve(m, tree, ws, opt, iopt, st, n, vel_free, grip)
+    if status or not state_ok(m, opt, pos, quat, vel[:, :3], vel[:, 3:]):
+        return FALLBACK, out, none_k, none_l, rep_i, rep_f
+    integrate(m, opt[0], pos, quat, vel, rot, out[0], out[1], out[3], inertia_w, inv_i)
+    if not project(m, ptree, pws, out[0], out[1]):
+        return FALLBACK, out, none_k, none_l, rep_i, rep_f
+    if not state_ok(m, opt, out[0], out[1], vel[:, :3], out[3]):
+        return FALLBACK, out, none_k, none_l, rep_i, rep_f
+    out[2][:, :] = vel[:, :3]
+    rheology_update(m, opt, st, rw, n, lam, vel, ws[3], out[1], out[4:])
+    keys = rw[10][:n]
+    order = np.argsort(keys, kind="mergesort")
+    rep_i[0], rep_i[1], rep_i[2], rep_i[3] = n, ncontact, iters, used
+    rep_f[0] = residual
+    report(rw, n, lam, rep_f)
+    return OK, out, keys[order], lam[order], rep_i, rep_f

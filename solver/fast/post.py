@@ -1,0 +1,230 @@
+"""Compiled end of the step: integration, joint projection, monitor checks, rheology update.
+
+Integration (``solver.integrate``, momentum form):
+    x[t+1] = x + h v,   q[t+1] = normalise(exp(h ω) ⊗ q),
+    ω ← I_w(q[t+1])⁻¹ I_w(q[t]) ω[t+1]     (angular momentum carried through the rotation).
+Projection (``solver.stabilize``): while a joint gap exceeds 0.1 mm (≤ 3 rounds),
+solve (J M⁻¹ Jᵀ + 10⁻¹⁴) μ = −C on the anchor rows and move x += Δx, q ← exp(Δθ) ⊗ q
+with Δ = M⁻¹ Jᵀ μ (the tree solve with h = 1, v_free = 0).
+Monitor (``solver.monitor``): non-finite state, |v| > max_speed or |ω| >
+max_angular_speed, a joint gap > max_joint_gap → the step is handed back (status ≠ 0).
+Rheology (``solver.step._rheology_update``): τ = λ_s; low-passed |τ| with
+α = h/(T + h); flowing joints q_sf ← ((D_d + D_f) q_sf + D_d h w)/(D_d + D_f + K_f h);
+un-yield re-anchors to exp(−q_sf) ⊗ q_rel; elastic joints q_sf = log(q_rel ⊗ anchor⁻¹).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit
+
+from solver.fast.kin import (
+    add,
+    congruence,
+    matvec,
+    neg,
+    norm,
+    put,
+    qconj,
+    qexp,
+    qlog,
+    qmatrix,
+    qmul,
+    qnormalize,
+    qrotate,
+    quat_at,
+    scale,
+    sub,
+    vec,
+)
+from solver.fast.rows import anchor_rows, flowing, q_rel
+from solver.fast.tree import node_rows, tree_solve
+from solver.rows import KIND_RHEOLOGY
+
+PROJECT_TOL, PROJECT_ROUNDS, PROJECT_RIDGE = 1e-4, 3, 1e-14
+
+
+@njit(cache=True, error_model="numpy")
+def integrate(m, h, pos, quat, vel, rot, out_pos, out_quat, out_omega, inertia_w, inv_new):
+    """Semi-implicit Euler in momentum form.  rot (nb,3,3) holds R(q[t]) on entry and
+    R(q[t+1]) on return; inertia_w, inv_new (nb,3,3) are scratch."""
+    inertia, inv_inertia = m[17], m[18]
+    for b in range(len(pos)):
+        put(out_pos, b, add(vec(pos, b), scale(h, (vel[b, 0], vel[b, 1], vel[b, 2]))))
+        omega = (vel[b, 3], vel[b, 4], vel[b, 5])
+        q = qnormalize(qmul(qexp(scale(h, omega)), quat_at(quat, b)))
+        for k in range(4):
+            out_quat[b, k] = q[k]
+        congruence(rot, b, inertia, b, inertia_w, b)
+        mom = matvec(inertia_w, b, omega)
+        qmatrix(q, rot, b)
+        congruence(rot, b, inv_inertia, b, inv_new, b)
+        put(out_omega, b, matvec(inv_new, b, mom))
+
+
+@njit(cache=True, error_model="numpy")
+def joint_gaps(m, pos, quat):
+    """(largest anchor distance (m), its joint) at the pose."""
+    parent, bone, anc_p, anc_c = m[0], m[1], m[2], m[3]
+    worst, at = 0.0, 0
+    for j in range(len(parent)):
+        p, c = parent[j], bone[j]
+        a = add(vec(pos, p), qrotate(quat_at(quat, p), vec(anc_p, j))) if p >= 0 else vec(anc_p, j)
+        b = add(vec(pos, c), qrotate(quat_at(quat, c), vec(anc_c, j)))
+        gap = norm(sub(b, a))
+        if gap > worst or j == 0:
+            worst, at = gap, j
+    return worst, at
+
+
+@njit(cache=True, error_model="numpy")
+def state_ok(m, opt, pos, quat, lin, ang):
+    """False when the monitor (solver.monitor.check_state) would raise."""
+    worst = 0.0
+    for b in range(len(pos)):
+        for k in range(3):
+            if not (np.isfinite(pos[b, k]) and np.isfinite(lin[b, k]) and np.isfinite(ang[b, k])):
+                return False
+        for k in range(4):
+            if not np.isfinite(quat[b, k]):
+                return False
+        speed = norm((lin[b, 0], lin[b, 1], lin[b, 2]))
+        spin = norm((ang[b, 0], ang[b, 1], ang[b, 2]))
+        worst = max(worst, speed / opt[8], spin / opt[9])
+    if worst > 1.0:
+        return False
+    return len(m[0]) == 0 or joint_gaps(m, pos, quat)[0] <= opt[10]
+
+
+@njit(cache=True, error_model="numpy")
+def response(rw, n, inv_mass, inv_i, h, resp_a, resp_b):
+    """Velocity change per unit row force: h M⁻¹ jac, per side (0 for the world)."""
+    _response_side(rw[0], rw[2], n, inv_mass, inv_i, h, resp_a)
+    _response_side(rw[1], rw[3], n, inv_mass, inv_i, h, resp_b)
+
+
+@njit(cache=True, error_model="numpy")
+def _response_side(body, jac, n, inv_mass, inv_i, h, out):
+    for i in range(n):
+        b = body[i]
+        if b < 0:
+            out[i, :] = 0.0
+            continue
+        for k in range(3):
+            out[i, k] = h * (inv_mass[b] * jac[i, k])
+        for k in range(3):
+            s = inv_i[b, k, 0] * jac[i, 3] + inv_i[b, k, 1] * jac[i, 4]
+            out[i, 3 + k] = h * (s + inv_i[b, k, 2] * jac[i, 5])
+
+
+@njit(cache=True, error_model="numpy")
+def apply(rw, n, resp_a, resp_b, lam, vel):
+    """vel += response to λ: every row's a side, then every row's b side (np.add.at order)."""
+    _apply_side(rw[0], n, resp_a, lam, vel)
+    _apply_side(rw[1], n, resp_b, lam, vel)
+
+
+@njit(cache=True, error_model="numpy")
+def apply_rows(rw, chosen, resp_a, resp_b, lam, vel):
+    """vel += response to λ of the chosen rows only (same order as ``apply``)."""
+    for side in range(2):
+        body, resp = (rw[0], resp_a) if side == 0 else (rw[1], resp_b)
+        for i in range(len(chosen)):
+            if chosen[i] and body[i] >= 0:
+                for k in range(6):
+                    vel[body[i], k] += resp[i, k] * lam[i]
+
+
+@njit(cache=True, error_model="numpy")
+def _apply_side(body, n, resp, lam, vel):
+    for i in range(n):
+        b = body[i]
+        if b >= 0:
+            for k in range(6):
+                vel[b, k] += resp[i, k] * lam[i]
+
+
+@njit(cache=True, error_model="numpy")
+def project(m, tree, pws, pos, quat):
+    """Pull joint anchors together in place (solver.stabilize.project_joints); False if the
+    projection system is degenerate.  tree = (order, parent, no_rheo, rows, size, tw);
+    pws = (rows, resp_a, resp_b, rot, inv_i, inertia_w, μ) scratch."""
+    order, parent, no_rheo, rows, size, tw = tree
+    prw, pa, pb, rot, inv_i, inertia_w, mu = pws
+    nb, nj = len(pos), len(m[0])
+    zeros = np.zeros((nb, 6))
+    for _ in range(PROJECT_ROUNDS):
+        if nj == 0 or joint_gaps(m, pos, quat)[0] <= PROJECT_TOL:
+            break
+        for b in range(nb):
+            qmatrix(quat_at(quat, b), rot, b)
+            congruence(rot, b, m[18], b, inv_i, b)
+            congruence(rot, b, m[17], b, inertia_w, b)
+        n = anchor_rows(m, pos, rot, pos, 1.0, 1.0, False, prw, 0)
+        response(prw, n, m[16], inv_i, 1.0, pa, pb)
+        prw[6][:n] = PROJECT_RIDGE
+        for i in order:
+            size[i] = node_rows(i, nb, no_rheo, rows[i])
+        if not tree_solve(
+            order, len(order), parent, nb, prw, zeros, 1.0, m[15], inertia_w, rows, size, tw, mu
+        ):
+            return False
+        delta = np.zeros((nb, 6))
+        apply(prw, n, pa, pb, mu, delta)
+        for b in range(nb):
+            for k in range(3):
+                pos[b, k] = pos[b, k] + delta[b, k]
+            q = qnormalize(qmul(qexp((delta[b, 3], delta[b, 4], delta[b, 5])), quat_at(quat, b)))
+            for k in range(4):
+                quat[b, k] = q[k]
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def rheology_update(m, opt, st, rw, n, lam, vel, rheo_joint, quat, out):
+    """q_sf, yield flags, anchors, torque filter and torques after the solve."""
+    kf, df, dd, has, yield_, plastic, finite_yield = m[4], m[5], m[6], m[7], m[12], m[13], m[14]
+    q_sf0, yielded0, anchor0, avg0 = st[4], st[5], st[6], st[7]
+    q_sf, yielded, anchor, avg, torque = out
+    h, parent, bone = opt[0], m[0], m[1]
+    nj = len(parent)
+    torque[:, :] = 0.0
+    w = np.zeros((nj, 3))
+    slot = 0
+    for i in range(n):
+        if rw[11][i] != KIND_RHEOLOGY:
+            continue
+        j = rheo_joint[i]
+        a, b = rw[0][i], rw[1][i]
+        wa, wb = 0.0, 0.0
+        for k in range(6):
+            wa += rw[2][i, k] * vel[a, k] if a >= 0 else 0.0
+            wb += rw[3][i, k] * vel[b, k] if b >= 0 else 0.0
+        torque[j, slot % 3] = lam[i]
+        w[j, slot % 3] = wa + wb
+        slot += 1
+    alpha = h / (opt[7] + h)
+    for j in range(nj):
+        tn = norm((torque[j, 0], torque[j, 1], torque[j, 2]))
+        flow0 = flowing(plastic, finite_yield, yielded0, j)
+        avg[j] = avg0[j] + alpha * (tn - avg0[j])
+        for k in range(3):
+            q_sf[j, k] = q_sf0[j, k]
+            if flow0 and has[j]:
+                t = dd[j, k] + df[j, k] + kf[j, k] * h
+                q_sf[j, k] = ((dd[j, k] + df[j, k]) * q_sf0[j, k] + dd[j, k] * h * w[j, k]) / t
+        for k in range(4):
+            anchor[j, k] = anchor0[j, k]
+        can_yield = finite_yield[j] and plastic[j]
+        qr = q_rel(j, parent, bone, quat)
+        unyield = can_yield and yielded0[j] and avg[j] < yield_[j]
+        if unyield:
+            qa = qmul(qexp(neg(vec(q_sf, j))), qr)
+            for k in range(4):
+                anchor[j, k] = qa[k]
+        if can_yield:
+            yielded[j] = (not unyield) if yielded0[j] else avg[j] > yield_[j]
+        else:
+            yielded[j] = False
+        if has[j] and not flowing(plastic, finite_yield, yielded, j):
+            put(q_sf, j, qlog(qmul(qr, qconj(quat_at(anchor, j)))))

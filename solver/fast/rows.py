@@ -1,0 +1,220 @@
+"""Compiled row builders: the same rows, in the same order, as ``solver.step.build_rows``.
+
+A row i couples bodies a, b (−1 = world) through Jacobian blocks (6,) = (linear,
+angular) and solves  w_i[t+1] + comp_i λ_i + bias_i = 0  within [lo_i, hi_i]
+(see ``solver.rows``).  The table lives in preallocated arrays
+rw = (body_a, body_b, jac_a, jac_b, lo, hi, comp, bias, fric_of, mu, key, kind);
+builders write from row ``n`` on and return the new row count.  The physics and the
+sign conventions are those of ``solver.joints`` (anchor rows with the arc
+correction N = exp(hω) r − r − h ω × r, rheology rows, swing/twist limits),
+``solver.contact_rows`` (normal row, two friction rows along the would-be slip) and
+``solver.grip`` (Voigt coupling rows); the formulas are restated where they are used.
+"""
+
+from __future__ import annotations
+
+import math
+
+from numba import njit
+
+from solver.fast.kin import (
+    add,
+    clip,
+    column,
+    cross,
+    dot,
+    matvec,
+    neg,
+    norm,
+    qconj,
+    qexp,
+    qlog,
+    qmul,
+    qrotate,
+    quat_at,
+    scale,
+    sub,
+    vec,
+)
+from solver.rows import KEY_SHIFT, KIND_JOINT, KIND_LIMIT, KIND_RHEOLOGY
+
+INF = math.inf
+ZERO = (0.0, 0.0, 0.0)
+AXES = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+
+
+@njit(cache=True, error_model="numpy")
+def set_row(rw, i, kind, ident, a, b, ja, jb, lo, hi, comp, bias, fric_of, mu):
+    """Row i; ja, jb = (linear, angular) 3-tuple pairs of the Jacobian blocks."""
+    rw[0][i] = a
+    rw[1][i] = b
+    for k in range(3):
+        rw[2][i, k] = ja[0][k]
+        rw[2][i, 3 + k] = ja[1][k]
+        rw[3][i, k] = jb[0][k]
+        rw[3][i, 3 + k] = jb[1][k]
+    rw[4][i] = lo
+    rw[5][i] = hi
+    rw[6][i] = comp
+    rw[7][i] = bias
+    rw[8][i] = fric_of
+    rw[9][i] = mu
+    rw[10][i] = (kind << KEY_SHIFT) + ident
+    rw[11][i] = kind
+
+
+@njit(cache=True, error_model="numpy")
+def point_jac(axis, r_a, r_b):
+    """Blocks of w = axis·(v_b + ω_b × r_b − v_a − ω_a × r_a); e·(ω × r) = ω·(r × e)."""
+    return (neg(axis), neg(cross(r_a, axis))), (axis, cross(r_b, axis))
+
+
+@njit(cache=True, error_model="numpy")
+def angular_jac(axis):
+    """Blocks of w = axis·(ω_b − ω_a)."""
+    return (neg(ZERO), neg(axis)), (ZERO, axis)
+
+
+@njit(cache=True, error_model="numpy")
+def arc_offset(omega, r, h):
+    """N = exp(hω) r − r − h ω × r: the part of an anchor's motion a linear row misses."""
+    return sub(sub(qrotate(qexp(scale(h, omega)), r), r), scale(h, cross(omega, r)))
+
+
+@njit(cache=True, error_model="numpy")
+def anchor_rows(m, pos, rot, omega, h, erp, arc, rw, n):
+    """Three hard rows per joint (anchors pushed at their midpoint), bias (erp·C + N_c − N_p)/h.
+
+    rot (nb,3,3) body rotations; omega (nb,3) the angular velocities of the arc terms
+    (the last step's solved ones, as solver.step); arc=False drops the arc terms (the
+    projection's rows)."""
+    parent, bone, anc_p, anc_c = m[0], m[1], m[2], m[3]
+    for j in range(len(parent)):
+        p, c = parent[j], bone[j]
+        com_p = vec(pos, p) if p >= 0 else ZERO
+        arm_p = matvec(rot, p, vec(anc_p, j)) if p >= 0 else vec(anc_p, j)
+        a_p = add(com_p, arm_p)
+        com_c = vec(pos, c)
+        a_c = add(com_c, matvec(rot, c, vec(anc_c, j)))
+        gap = scale(erp, sub(a_c, a_p))
+        if arc:
+            gap = add(gap, arc_offset(_omega(omega, c), sub(a_c, com_c), h))
+            gap = sub(gap, arc_offset(_omega(omega, p), sub(a_p, com_p), h))
+        mid = scale(0.5, add(a_p, a_c))
+        r_a, r_b = sub(mid, com_p), sub(mid, com_c)
+        for k in range(3):
+            ja, jb = point_jac(AXES[k], r_a, r_b)
+            set_row(rw, n, KIND_JOINT, 3 * j + k, p, c, ja, jb, -INF, INF, 0.0, gap[k] / h, -1, 0.0)
+            n += 1
+    return n
+
+
+@njit(cache=True, error_model="numpy")
+def _omega(omega, b):
+    return vec(omega, b) if b >= 0 else ZERO
+
+
+@njit(cache=True, error_model="numpy")
+def q_rel(j, parent, bone, quat):
+    """q_p⁻¹ ⊗ q_c of joint j (the world's q_p is the identity)."""
+    p = parent[j]
+    qp = quat_at(quat, p) if p >= 0 else (1.0, 0.0, 0.0, 0.0)
+    return qmul(qconj(qp), quat_at(quat, bone[j]))
+
+
+@njit(cache=True, error_model="numpy")
+def flowing(plastic, finite_yield, yielded, j):
+    """Joint j uses the three-element row: finite D_d and yielded (or no yield torque).
+
+    (Helpers called per joint or per row take single arrays, never the packed tuples:
+    passing a tuple of many arrays to a call costs far more than the call's work.)"""
+    return plastic[j] and (yielded[j] or not finite_yield[j])
+
+
+@njit(cache=True, error_model="numpy")
+def rheology_rows(m, quat, rot, h, q_sf, yielded, anchor, rheo_joint, rw, n):
+    """Three compliant rows per joint with rheology, on the parent's axes a_k = R_p e_k:
+    Voigt C = 1/(D_f + K_f h), bias K_f δ/(D_f + K_f h), δ = log(q_rel ⊗ anchor⁻¹);
+    three-element C = (D_d + D_f + K_f h)/(D_d (K_f h + D_f)), bias K_f q_sf/(K_f h + D_f)."""
+    parent, bone, kf, df, dd, has = m[0], m[1], m[4], m[5], m[6], m[7]
+    plastic, finite_yield = m[13], m[14]
+    for j in range(len(parent)):
+        if not has[j]:
+            continue
+        p = parent[j]
+        delta = qlog(qmul(q_rel(j, parent, bone, quat), qconj(quat_at(anchor, j))))
+        flow = flowing(plastic, finite_yield, yielded, j)
+        for k in range(3):
+            if flow:
+                s = kf[j, k] * h + df[j, k]
+                comp = (dd[j, k] + df[j, k] + kf[j, k] * h) / (dd[j, k] * s)
+                bias = kf[j, k] / s * q_sf[j, k]
+            else:
+                s = df[j, k] + kf[j, k] * h
+                comp, bias = 1.0 / s, kf[j, k] * delta[k] / s
+            axis = column(rot, p, k) if p >= 0 else AXES[k]
+            ja, jb = angular_jac(axis)
+            set_row(
+                rw, n, KIND_RHEOLOGY, 3 * j + k, p, bone[j], ja, jb, -INF, INF, comp, bias, -1, 0.0
+            )
+            rheo_joint[n] = j
+            n += 1
+    return n
+
+
+@njit(cache=True, error_model="numpy")
+def _perpendicular(d):
+    v = cross(d, (1.0, 0.0, 0.0))
+    if norm(v) < 1e-6:
+        v = cross(d, (0.0, 0.0, 1.0))
+    return _div(v, norm(v))
+
+
+@njit(cache=True, error_model="numpy")
+def _div(v, s):
+    return (v[0] / s, v[1] / s, v[2] / s)
+
+
+@njit(cache=True, error_model="numpy")
+def _wrap(x):
+    """(x + π) mod 2π − π (numba's float % is Python's, i.e. numpy's, floor mod)."""
+    return (x + math.pi) % (2.0 * math.pi) - math.pi
+
+
+@njit(cache=True, error_model="numpy")
+def limit_rows(m, quat, rot, h, erp, margin, rw, n):
+    """One-sided rows (λ ≥ 0) for limits within ``margin``: swing rows of every joint,
+    then twist-low, then twist-high; bias C/h when C ≥ 0 (speculative) else erp·C/h.
+    swing θ = acos(d·d'), C = swing − θ, axis −R_p (d × d')/|d × d'|;
+    twist φ = 2 atan2(q.xyz·d, q.w) wrapped to [−π, π), C = φ − lo or hi − φ, axis ±R_p d'."""
+    parent, bone, axis_rest, swing, tw_lo, tw_hi = m[0], m[1], m[8], m[9], m[10], m[11]
+    for slot in range(3):
+        for j in range(len(parent)):
+            p = parent[j]
+            q = q_rel(j, parent, bone, quat)
+            d = vec(axis_rest, j)
+            d_now = qrotate(q, d)
+            if slot == 0:
+                c = swing[j] - math.acos(clip(dot(d, d_now), -1.0, 1.0))
+            else:
+                if q[0] < 0.0:
+                    q = (-q[0], -q[1], -q[2], -q[3])
+                twist = _wrap(2.0 * math.atan2(q[1] * d[0] + q[2] * d[1] + q[3] * d[2], q[0]))
+                c = twist - tw_lo[j] if slot == 1 else tw_hi[j] - twist
+            if not c < margin:
+                continue
+            if slot == 0:
+                nv = cross(d, d_now)
+                length = norm(nv)
+                nv = _div(nv, length) if length > 1e-9 else _perpendicular(d)
+                world = neg(matvec(rot, p, nv) if p >= 0 else nv)
+            else:
+                world = matvec(rot, p, d_now) if p >= 0 else d_now
+                world = world if slot == 1 else neg(world)
+            ja, jb = angular_jac(world)
+            bias = (c if c >= 0.0 else erp * c) / h
+            set_row(
+                rw, n, KIND_LIMIT, 4 * j + slot, p, bone[j], ja, jb, 0.0, INF, 0.0, bias, -1, 0.0
+            )
+            n += 1
+    return n

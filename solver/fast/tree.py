@@ -1,0 +1,238 @@
+"""Exact solves of two-sided row tables: linear-time over the joint tree, and dense.
+
+The rows solve  J v + C λ + β = 0  with  v = v_free + h M⁻¹ Jᵀ λ.  With the velocity
+change y = v − v_free as an unknown beside λ this is the sparse symmetric system
+(Baraff, "Linear-time dynamics using Lagrange multipliers", 1996)
+
+    [ M/h   −Jᵀ ] [y]   [      0      ]
+    [ −J    −C  ] [λ] = [ J v_free + β ],
+
+quasi-definite (M/h ≻ 0; C ≻ 0 once every hard row is regularised), so it has a
+signed block Cholesky factorisation in any symmetric order (the order still matters for
+accuracy: see ``solver.fast.pack._forest``).  Its graph has one node per movable body
+(6×6 block M_b/h, M_b = diag(m, m, m, R I Rᵀ)) and one per joint (its 3 anchor rows
+and 3 rheology rows, block −diag(C)), plus one for the grip's rows: a forest, because
+the bones form a tree and immovable bodies are left out.  Eliminating children before
+parents,
+
+    D_i = K_ii − Σ_c K_ic D_c⁻¹ K_ci,    z_i = r_i − Σ_c K_ic D_c⁻¹ z_c,
+    x_root = D_root⁻¹ z_root,            x_i = D_i⁻¹ (z_i − K_ip x_p),
+
+creates no fill, so the cost is O(nodes) 6×6 block operations.  D_i is positive
+definite for bodies and negative definite for row nodes; each is factored as
+D_i = ±L Lᵀ, and with Y = L⁻¹ K_ip the update is K_pi D_i⁻¹ K_ip = ±YᵀY.
+``dense_solve`` (Cholesky of Q = h J M⁻¹ Jᵀ + C) is the simple alternative, kept for
+tests and the benchmark.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+
+@njit(cache=True, error_model="numpy")
+def chol(a, m):
+    """In-place lower Cholesky factor of a[:m, :m] (lower triangle read); False if not SPD."""
+    for j in range(m):
+        d = a[j, j]
+        for k in range(j):
+            d -= a[j, k] * a[j, k]
+        if not d > 0.0:
+            return False
+        d = math.sqrt(d)
+        a[j, j] = d
+        for i in range(j + 1, m):
+            s = a[i, j]
+            for k in range(j):
+                s -= a[i, k] * a[j, k]
+            a[i, j] = s / d
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def forward(lo, m, b):
+    """b ← L⁻¹ b in place for the factor in lo[:m, :m]."""
+    for i in range(m):
+        s = b[i]
+        for k in range(i):
+            s -= lo[i, k] * b[k]
+        b[i] = s / lo[i, i]
+
+
+@njit(cache=True, error_model="numpy")
+def backward(lo, m, b):
+    """b ← L⁻ᵀ b in place."""
+    for i in range(m - 1, -1, -1):
+        s = b[i]
+        for k in range(i + 1, m):
+            s -= lo[k, i] * b[k]
+        b[i] = s / lo[i, i]
+
+
+@njit(cache=True, error_model="numpy")
+def chol_solve(lo, m, b):
+    """b ← (L Lᵀ)⁻¹ b in place."""
+    forward(lo, m, b)
+    backward(lo, m, b)
+
+
+@njit(cache=True, error_model="numpy")
+def row_velocity(rw, r, vel):
+    """J_r v (static sides skipped)."""
+    a, b = rw[0][r], rw[1][r]
+    w = 0.0
+    if a >= 0:
+        for k in range(6):
+            w += rw[2][r, k] * vel[a, k]
+    if b >= 0:
+        for k in range(6):
+            w += rw[3][r, k] * vel[b, k]
+    return w
+
+
+@njit(cache=True, error_model="numpy")
+def node_rows(i, nb, rheo_start, out):
+    """Rows of joint node i = nb + j into out (3 anchor rows 3j..3j+2, then the rheology
+    rows rheo_start[j]..+2 when rheo_start[j] ≥ 0); returns their count (0 for a body)."""
+    if i < nb:
+        return 0
+    j = i - nb
+    for k in range(3):
+        out[k] = 3 * j + k
+    if rheo_start[j] < 0:
+        return 3
+    for k in range(3):
+        out[3 + k] = rheo_start[j] + k
+    return 6
+
+
+@njit(cache=True, error_model="numpy")
+def _init_nodes(seq, nseq, nb, rw, vel_free, h, mass, inertia_w, rows, size, dm, z):
+    """D_i and right-hand sides z_i before elimination."""
+    for q in range(nseq):
+        i = seq[q]
+        dm[i, :, :] = 0.0
+        z[i, :] = 0.0
+        if i < nb:
+            size[i] = 6
+            for k in range(3):
+                dm[i, k, k] = mass[i] / h
+                for c in range(3):
+                    dm[i, 3 + k, 3 + c] = inertia_w[i, k, c] / h
+            continue
+        for k in range(size[i]):
+            r = rows[i, k]
+            dm[i, k, k] = -rw[6][r]
+            z[i, k] = row_velocity(rw, r, vel_free) + rw[7][r]
+
+
+@njit(cache=True, error_model="numpy")
+def _coupling(i, p, nb, rw, rows, size, g):
+    """g = K_ip = −J block between body node and row node (transposed when i is the body)."""
+    body_is_p = i >= nb
+    row_node = i if body_is_p else p
+    body = p if body_is_p else i
+    for k in range(size[row_node]):
+        r = rows[row_node, k]
+        jac = rw[2] if rw[0][r] == body else rw[3]
+        for c in range(6):
+            if body_is_p:
+                g[k, c] = -jac[r, c]
+            else:
+                g[c, k] = -jac[r, c]
+
+
+@njit(cache=True, error_model="numpy")
+def _eliminate(i, p, m, mp, sign, dm, y, w, g):
+    """With D_i = sign·L Lᵀ: Y = L⁻¹ G, D_p −= sign·YᵀY, z_p −= sign·Yᵀ (L⁻¹ z_i)
+    (lower triangles only: that is what the factorisation reads)."""
+    for c in range(mp):
+        for r in range(m):
+            s = g[r, c]
+            for k in range(r):
+                s -= dm[i, r, k] * y[i, k, c]
+            y[i, r, c] = s / dm[i, r, r]
+    for a in range(mp):
+        for b in range(a + 1):
+            s = 0.0
+            for k in range(m):
+                s += y[i, k, a] * y[i, k, b]
+            dm[p, a, b] -= sign * s
+        s = 0.0
+        for k in range(m):
+            s += y[i, k, a] * w[i, k]
+        w[p, a] -= sign * s
+
+
+@njit(cache=True, error_model="numpy")
+def tree_solve(seq, nseq, parent, nb, rw, vel_free, h, mass, inertia_w, rows, size, tw, lam):
+    """λ of the two-sided rows by block elimination over the forest (module docstring).
+
+    seq[:nseq]: nodes, children before parents; parent: node → parent node or −1;
+    rows/size: each row node's rows; tw = (D, Y, w, g) workspaces.  False when a
+    block is not definite (degenerate rows: the caller falls back)."""
+    dm, y, w, g = tw
+    _init_nodes(seq, nseq, nb, rw, vel_free, h, mass, inertia_w, rows, size, dm, w)
+    for q in range(nseq):
+        i = seq[q]
+        m = size[i]
+        sign = 1.0 if i < nb else -1.0
+        dm[i, :m, :m] *= sign
+        if not chol(dm[i], m):
+            return False
+        forward(dm[i], m, w[i])  # w_i = L⁻¹ z_i
+        p = parent[i]
+        if p >= 0:
+            _coupling(i, p, nb, rw, rows, size, g)
+            _eliminate(i, p, m, size[p], sign, dm, y, w, g)
+    for q in range(nseq - 1, -1, -1):  # x_i = sign·L⁻ᵀ(L⁻¹ z_i − Y x_p), parents first
+        i = seq[q]
+        p = parent[i]
+        m = size[i]
+        if p >= 0:
+            for k in range(m):
+                for c in range(size[p]):
+                    w[i, k] -= y[i, k, c] * w[p, c]
+        backward(dm[i], m, w[i])
+        sign = 1.0 if i < nb else -1.0
+        for k in range(m):
+            w[i, k] *= sign
+            if i >= nb:
+                lam[rows[i, k]] = w[i, k]
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def _dot6(x, i, y, j):
+    s = 0.0
+    for k in range(6):
+        s += x[i, k] * y[j, k]
+    return s
+
+
+@njit(cache=True, error_model="numpy")
+def dense_solve(rw, resp_a, resp_b, n, vel_free, lam):
+    """λ = −Q⁻¹(J v_free + β), Q = A + diag(C), A_ij = jac_i·resp_j over shared bodies."""
+    q = np.zeros((n, n))
+    a, b, ja, jb = rw[0], rw[1], rw[2], rw[3]
+    for i in range(n):
+        for j in range(i + 1):
+            s = 0.0
+            if a[i] >= 0 and a[i] == a[j]:
+                s += _dot6(ja, i, resp_a, j)
+            if a[i] >= 0 and a[i] == b[j]:
+                s += _dot6(ja, i, resp_b, j)
+            if b[i] >= 0 and b[i] == a[j]:
+                s += _dot6(jb, i, resp_a, j)
+            if b[i] >= 0 and b[i] == b[j]:
+                s += _dot6(jb, i, resp_b, j)
+            q[i, j] = s
+        q[i, i] += rw[6][i]
+        lam[i] = -(row_velocity(rw, i, vel_free) + rw[7][i])
+    if not chol(q, n):
+        return False
+    chol_solve(q, n, lam)
+    return True
