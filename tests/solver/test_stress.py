@@ -34,14 +34,10 @@ KNOWN = {
         "zig-zag mode of links under tension T unstable for h > ~0.85·sqrt(m·L/T) (3.8 ms "
         "for 2 cm, 20 g links under a 2 m rope)"
     ),
-    "spin": (
-        "solver/integrate.py integrate_pose: the explicit rotation exp(hω) before carrying L "
-        "raises E by ~½h²(Ω×Π)·I⁻¹(Ω×Π) every step: E climbs from 320 J to |L|²/(2·I_min)"
-    ),
 }
 RANDOM_CAUSES = (
-    "PGS non-convergence and geometric stiffness of light bones under tension, and the "
-    "gyroscopic energy pump (docs/stress.md, 'Random rigs')"
+    "PGS non-convergence and geometric stiffness of light bones under tension "
+    "(docs/stress.md, 'Random rigs')"
 )
 
 
