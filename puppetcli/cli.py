@@ -21,6 +21,7 @@ COMMANDS = {
     "render": "puppetcli.commands.render",
     "rig": "puppetcli.commands.rig",
     "convert": "puppetcli.commands.convert",
+    "record": "puppetcli.commands.record",
 }
 HELP = {
     "validate": "Check a rig file and summarise what its simulation needs.",
@@ -30,6 +31,7 @@ HELP = {
     "render": "Draw poses: a contact sheet of keys, or a video of a trace.",
     "rig": "Make rigs from other formats (rig from-bvh FILE.bvh -o RIG.yaml).",
     "convert": "Run a manipulation script and write the motion as BVH.",
+    "record": "Turn a script into the session a SPIDAR-G device would record (.mcap).",
 }
 
 

@@ -7,6 +7,11 @@ accumulate rounding.  The pointer keeps its last pose between motions, and a
 grip holds through waits and pushes until `release`.  A key captures the state
 when it is reached.  If the simulation fails, the keys and expectation results
 so far are returned with the error, and the trace keeps every step written.
+
+A session replay (puppetcli.replay) drives the same runner: its pointer follows the
+device's estimated pose (any object with ``pose(t)``, like ``Motion``) and its
+actions are the session's events, each preceded by an ``Until`` that steps to the
+first step boundary at or after the event's time.
 """
 
 from __future__ import annotations
@@ -28,13 +33,29 @@ from puppetcli.script_actions import Expect, Grip, Move, Release, Rotate, Touch,
 from puppetcli.snapshot import capture, push_input
 from solver import quat
 from solver.errors import SimulationError
-from solver.grip import Coupling, bone_reach, make_coupling, nearest_point, segment_distances
+from solver.grip import (
+    Coupling,
+    Pointer,
+    bone_reach,
+    make_coupling,
+    nearest_point,
+    segment_distances,
+)
 from solver.model import Model
 from solver.observe import bone_points
 from solver.state import State, StepInput, StepReport, initial_state
 from solver.step import step
 
 POINTER_ACTIONS = (Grip, Move, Rotate, Twist, Release, Touch)
+EVENT_SLACK = 1e-9  # s: an event "at" a step boundary despite float rounding of the time
+
+
+@dataclass(frozen=True)
+class Until:
+    """Step to the first step boundary at or after ``time`` (s): a replay's wait for an event."""
+
+    time: float
+    line: int = 0
 
 
 @dataclass
@@ -70,8 +91,10 @@ class Runner:
         script: Script,
         trace: RunTrace | None = None,
         on_step: Callable[[State], None] | None = None,
+        on_action: Callable[[object, float], None] | None = None,
     ) -> None:
         self.model, self.script, self.trace, self.on_step = model, script, trace, on_step
+        self.on_action = on_action  # called after each action with the time it started
         self.state = initial_state(model)
         self.keys = KeyframeSet()
         self.motion: Motion = still(np.asarray(script.pointer_start, dtype=float), quat.IDENTITY)
@@ -82,15 +105,19 @@ class Runner:
         self.haptics = HapticChain(script.max_force, script.max_torque, script.lowpass)
         self.expectations: list[ExpectResult] = []
         self.peak = self.peak_since_key = self.peak_displayed = 0.0
+        self.displayed = (np.zeros(3), np.zeros(3))  # the last step's wrench on the hand
 
-    def run(self) -> RunResult:
-        """Run every action, then wait out the script's duration."""
+    def run(self, actions: tuple | None = None) -> RunResult:
+        """Run every action (the script's unless given), then wait out the script's duration."""
         start = time.perf_counter()
         error = None
         handlers = self._handlers()
         try:
-            for action in self.script.actions:
+            for action in self.script.actions if actions is None else actions:
+                began = self.state.time
                 handlers[type(action)](action)
+                if self.on_action is not None:
+                    self.on_action(action, began)
             if self.script.duration is not None:
                 self.advance(self.script.duration - self.state.time)
         except SimulationError as exc:
@@ -114,6 +141,9 @@ class Runner:
             Touch: self._move,
             Rotate: lambda a: self._turn(a.axis * a.angle, a.duration),
             Twist: self._twist,
+            Until: lambda a: self.advance(
+                a.time - self.state.time + 0.5 * self.model.options.h - EVENT_SLACK
+            ),
         }
 
     def _key(self, action: Key) -> None:
@@ -159,8 +189,10 @@ class Runner:
         else:
             b = self.model.bone_names.index(action.bone)
             point = self._grip_point(b, action.point, pos)
+        # The pointer as it is now (a replay's track keeps moving; a script's motion is done).
+        now = Pointer(*self._pointer_pose(), np.zeros(3), np.zeros(3))
         self.coupling = make_coupling(
-            self.state, pointer_over_step(self.motion, self.state.time, 1.0, 0.0), b, point,
+            self.state, now, b, point,
             stiffness=action.stiffness, damping=action.damping, rot_stiffness=action.rot_stiffness,
             rot_damping=action.rot_damping, force_limit=action.force_limit,
             torque_limit=action.torque_limit, position_only=action.position_only,
@@ -213,6 +245,7 @@ class Runner:
         self.peak = max(self.peak, force)
         self.peak_since_key = max(self.peak_since_key, force)
         shown = self.haptics.display(-on_doll, -report.grip_torque)
+        self.displayed = shown
         self.peak_displayed = max(self.peak_displayed, float(np.linalg.norm(shown[0])))
         if self.on_step is not None:
             self.on_step(self.state)

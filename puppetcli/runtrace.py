@@ -5,7 +5,9 @@ Channels added to trace.mcap's step channels (see puppetcli.trace):
 `/puppet/keyframe` (puppetcli.KeyframeEvent, when a key is taken) and
 `/puppet/pointer` (foxglove.SceneUpdate: the pointer and, in grip mode, the
 coupling line to the grip point).  Device channels exist only for scripts that
-use the pointer.
+use the pointer.  Session replays (``spidar=True``) add `/spidar/tensions`
+(puppetcli.SpidarTensions: string tensions and the displayed wrench Aᵀt) and
+`/spidar/estimate` (puppetcli.SpidarEstimate: the estimated grip pose).
 """
 
 from __future__ import annotations
@@ -30,12 +32,19 @@ CHANNELS = {
     "/haptic/wrench": "puppetcli.HapticWrench",
     "/puppet/pointer": "foxglove.SceneUpdate",
 }
+SPIDAR_CHANNELS = {
+    "/spidar/tensions": "puppetcli.SpidarTensions",
+    "/spidar/estimate": "puppetcli.SpidarEstimate",
+}
 
 
 class RunTrace:
     """Writes every ``every``-th step (and every key) of a run."""
 
-    def __init__(self, path: Path, model: Model, script: Script, every: int, pointer: bool) -> None:
+    def __init__(
+        self, path: Path, model: Model, script: Script, every: int, pointer: bool,
+        spidar: bool = False,
+    ) -> None:  # fmt: skip
         self.model, self.script, self.every, self.pointer = model, script, every, pointer
         self.writer = TraceWriter(
             path, model.bone_names, list(model.bone_parent), model.joint_names
@@ -43,9 +52,9 @@ class RunTrace:
         self.writer.add_channel(
             "/puppet/keyframe", "puppetcli.KeyframeEvent", load_schema("puppetcli.KeyframeEvent")
         )
-        if pointer:
-            for topic, name in CHANNELS.items():
-                self.writer.add_channel(topic, name, load_schema(name))
+        channels = (CHANNELS if pointer else {}) | (SPIDAR_CHANNELS if spidar else {})
+        for topic, name in channels.items():
+            self.writer.add_channel(topic, name, load_schema(name))
 
     def __enter__(self) -> RunTrace:
         self.writer.__enter__()
@@ -73,6 +82,21 @@ class RunTrace:
         )  # fmt: skip
         if self.pointer and inp.pointer is not None:
             self._device(s, inp.pointer, coupling, requested, displayed)
+
+    def spidar(self, s: State, track, k: int, shown, wanted: tuple) -> None:
+        """The device's side of a replayed step: estimate at tick k, tensions, Aᵀt."""
+        if s.step % self.every:
+            return
+        self.writer.write("/spidar/estimate", s.time, {
+            "t": s.time,
+            "device": {"position": track.device_pos[k], "orientation": track.device_quat[k]},
+            "world": {"position": track.world_pos[k], "orientation": track.world_quat[k]},
+        })  # fmt: skip
+        self.writer.write("/spidar/tensions", s.time, {
+            "t": s.time, "tensions": shown.tensions,
+            "displayed": {"force": shown.force, "torque": shown.torque},
+            "wanted": {"force": wanted[0], "torque": wanted[1]}, "converged": shown.converged,
+        })  # fmt: skip
 
     def _device(
         self, s: State, ptr, coupling: Coupling | None, requested: tuple, displayed: tuple

@@ -1,4 +1,5 @@
-"""``puppetcli convert INPUT -o OUT.bvh --rig RIG``: run a script, write the motion as BVH."""
+"""``puppetcli convert INPUT -o OUT.bvh --rig RIG``: run a script (or replay a session),
+write the motion as BVH."""
 
 from __future__ import annotations
 
@@ -11,8 +12,9 @@ import click
 
 from puppetcli.bvh import ORDERS
 from puppetcli.bvh_write import FrameSampler, write_keys_bvh
-from puppetcli.errors import ScriptError, SessionError
+from puppetcli.errors import ScriptError
 from puppetcli.outputs import OutputError
+from puppetcli.replay import load_replay
 from puppetcli.rigfile import load_rig
 from puppetcli.runner import Runner, script_model
 from puppetcli.script import load_script
@@ -50,29 +52,25 @@ KEYS_FPS = 30.0  # Frame Time of a BVH of keys when no --fps is given
 def command(
     source: Path, out: Path, rig: Path, fps: float | None, order: str, scale: float, force: bool
 ) -> None:
-    """Run the manipulation script SOURCE (.yaml) on RIG and write its motion as BVH.
+    """Run the manipulation script SOURCE (.yaml), or replay the recorded session SOURCE
+    (.mcap, see docs/sessions.md), on RIG and write its motion as BVH.
 
     Without --fps each key of the script is one frame; with --fps the whole
     run is sampled at that rate.  If the simulation fails, the frames before
-    the failure are still written and the exit status is 1.  Recorded sessions
-    (.mcap) are not supported yet.
+    the failure are still written and the exit status is 1.
     """
-    if source.suffix.lower() == ".mcap":
-        raise SessionError(
-            f"{source}: expected a manipulation script (.yaml), got a recorded session "
-            "(.mcap): sessions are not supported yet"
-        )
     if (out.exists() or out.is_symlink()) and not force:
         raise OutputError(f"{out} exists: pass --force to overwrite")
     spec = load_rig(rig)
-    plan = load_script(source, spec)
+    replay = load_replay(source, spec) if source.suffix.lower() == ".mcap" else None
+    plan = replay.script if replay is not None else load_script(source, spec)
     model = script_model(build_model(spec), plan)
     if _total_steps(model, plan) > MAX_STEPS:
         raise ScriptError(
             f"{source}: expected at most {MAX_STEPS:,} steps, got {_total_steps(model, plan):,} "
             f"(duration over step h = {model.options.h:g} s)"
         )
-    runner = Runner(model, plan)
+    runner = replay.runner(model) if replay is not None else Runner(model, plan)
     sampler = FrameSampler(model, fps, runner.state) if fps is not None else None
     with _progress(_total_steps(model, plan)) as tick:
         runner.on_step = _chain(sampler, tick)

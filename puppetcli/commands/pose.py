@@ -1,4 +1,5 @@
-"""``puppetcli pose RIG SCRIPT -o OUTDIR``: run a manipulation script, write keys and a trace."""
+"""``puppetcli pose RIG SCRIPT -o OUTDIR``: run a manipulation script (or replay a recorded
+session, ``.mcap``), write keys and a trace."""
 
 from __future__ import annotations
 
@@ -13,6 +14,7 @@ from puppetcli.errors import ScriptError
 from puppetcli.keyframes import write_keyframes
 from puppetcli.outputs import prepare_outdir
 from puppetcli.render import render_keys
+from puppetcli.replay import Replay, load_replay
 from puppetcli.rigfile import load_rig
 from puppetcli.runner import Runner, RunResult, script_model
 from puppetcli.runtrace import RunTrace
@@ -45,6 +47,13 @@ MAX_STEPS = 10_000_000  # a run longer than this is a mistake in the script (h o
     help="Write the trace every N steps.",
 )
 @click.option("--no-trace", is_flag=True, help="Do not write trace.mcap.")
+@click.option(
+    "--h",
+    "step",
+    type=click.FloatRange(min=0.0, min_open=True),
+    default=None,
+    help="Physics step (s), overriding the rig's and the script's or session's.",
+)
 @click.option("--no-render", is_flag=True, help="Do not draw keys/NNN.png and sheet.png.")
 @click.option(
     "--order",
@@ -87,6 +96,7 @@ def command(
     force: bool,
     trace_every: int,
     no_trace: bool,
+    step: float | None,
     no_render: bool,
     order: str,
     fps: float,
@@ -94,7 +104,8 @@ def command(
     scale: float,
     view: str,
 ) -> None:
-    """Run a manipulation script on a rig: keyframes, BVH, a trace and pictures.
+    """Run a manipulation script (or replay a session .mcap) on a rig: keyframes, BVH, a
+    trace and pictures.
 
     Writes OUTDIR/keyframes.json, OUTDIR/keyframes.bvh (one frame per key),
     OUTDIR/trace.mcap, OUTDIR/keys/NNN.png (one picture per key) and
@@ -104,13 +115,16 @@ def command(
     Failed `expect` lines are printed and also end with exit status 1.
     """
     spec = load_rig(rig)
-    plan = load_script(script, spec)
+    replay = load_replay(script, spec) if script.suffix.lower() == ".mcap" else None
+    plan = replay.script if replay is not None else load_script(script, spec)
     model = script_model(build_model(spec), plan)
+    if step is not None:
+        model = model.with_options(h=step)
     _check_length(script, plan, model.options.h)
     skipped = {"trace.mcap"} if no_trace else set()
     skipped |= {"sheet.png", "keys"} if no_render else set()
     prepare_outdir(outdir, [name for name in OUTPUTS if name not in skipped], force)
-    result = _run(model, plan, outdir, trace_every, no_trace)
+    result = _run(model, plan, outdir, trace_every, no_trace, replay)
     write_keyframes(outdir / "keyframes.json", model.name, result.keys)
     if len(result.keys):
         write_keys_bvh(
@@ -140,13 +154,19 @@ def _check_length(script: Path, plan, h: float) -> None:
         )
 
 
-def _run(model, plan, outdir: Path, trace_every: int, no_trace: bool) -> RunResult:
+def _run(
+    model, plan, outdir: Path, trace_every: int, no_trace: bool, replay: Replay | None = None
+) -> RunResult:
     total = max(plan.duration or 0.0, _timeline_length(plan))
     with _progress(round(total / model.options.h)) as tick:
-        runner = Runner(model, plan, on_step=tick)
+        if replay is not None:
+            runner = replay.runner(model, on_step=tick)
+        else:
+            runner = Runner(model, plan, on_step=tick)
         if no_trace:
             return runner.run()
-        with RunTrace(outdir / "trace.mcap", model, plan, trace_every, runner.pointer_on) as trace:
+        path, spidar = outdir / "trace.mcap", replay is not None
+        with RunTrace(path, model, plan, trace_every, runner.pointer_on, spidar) as trace:
             runner.trace = trace
             return runner.run()
 

@@ -1,0 +1,81 @@
+"""``puppetcli record RIG SCRIPT -o SESSION.mcap``: the recording a SPIDAR-G would have made."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from puppetcli.errors import SessionError
+from puppetcli.outputs import OutputError
+from puppetcli.record import record_session
+from puppetcli.rigfile import load_rig
+from puppetcli.script import load_script
+from puppetcli.session import write_session
+from puppetcli.spidar import DeviceError, DevicePreset, preset, preset_from_yaml
+
+DEFAULT_DEVICE = "SpidarG6X3R"
+
+
+@click.command("record")
+@click.argument("rig", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.argument("script", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option(
+    "-o", "--out", required=True, type=click.Path(dir_okay=False, path_type=Path),
+    help="The session file to write (.mcap).",
+)  # fmt: skip
+@click.option(
+    "--device", default=DEFAULT_DEVICE, show_default=True,
+    help="A built-in preset name (SpidarG6X3R, SpidarG6X3L, SpidarG6X4R, SpidarG6X4L, "
+    "HISpidarG6X) or a preset YAML file.",
+)  # fmt: skip
+@click.option(
+    "--noise", type=click.FloatRange(min=0.0), default=0.0, show_default=True,
+    help="Standard deviation of Gaussian noise added to every encoder count (counts).",
+)  # fmt: skip
+@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the count noise.")
+@click.option("--with-pose", is_flag=True, help="Also store the true grip pose (/spidar/pose).")
+@click.option("--force", is_flag=True, help="Overwrite SESSION.mcap if it exists.")
+def command(
+    rig: Path, script: Path, out: Path, device: str, noise: float, seed: int, with_pose: bool,
+    force: bool,
+) -> None:  # fmt: skip
+    """Turn the manipulation script SCRIPT into the session a SPIDAR-G device would record.
+
+    The pointer path is sampled every 1 ms, mapped into the device (the script's
+    `workspace:`, or one fitted so the path fills 80 % of the device's reach) and
+    turned into encoder counts; grips, releases and keys become button events,
+    pushes and expectations script events.  Replay it with `puppetcli pose RIG
+    SESSION.mcap`.  The format is described in docs/sessions.md.
+    """
+    if out.suffix.lower() != ".mcap":
+        raise SessionError(
+            f"{out}: expected a session file name ending in .mcap, got '{out.suffix}'"
+        )
+    if (out.exists() or out.is_symlink()) and not force:
+        raise OutputError(f"{out} exists: pass --force to overwrite")
+    spec = load_rig(rig)
+    plan = load_script(script, spec)
+    session = record_session(spec, plan, _device(device), noise, seed, store_pose=with_pose)
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"{out.parent}: cannot create directory: {exc.strerror}") from exc
+    write_session(out, session)
+    ws = session.workspace
+    how = "fitted to 80 % of the reach" if ws.fitted else "from the script"
+    offset = ", ".join(f"{x:g}" for x in ws.offset)
+    click.echo(
+        f"wrote {out}: {len(session.tick_time)} ticks ({session.tick_time[-1]:.3f} s) on "
+        f"{session.preset.name}, {len(session.events)} events; workspace offset [{offset}] m, "
+        f"scale {ws.scale:g} ({how})"
+    )
+
+
+def _device(text: str) -> DevicePreset:
+    path = Path(text)
+    if path.suffix.lower() in (".yaml", ".yml"):
+        if not path.is_file():
+            raise DeviceError(f"{text}: expected a device preset file, got no such file")
+        return preset_from_yaml(path)
+    return preset(text)
