@@ -2,9 +2,10 @@
 
     v_free  = v + h (g + F/m),  ω_free = ω + h I_w⁻¹ τ
     rows    = anchor | rheology | limits | contacts (normal, friction) | grip or pointer
-    lam     = direct (tree elimination; rows leaving their box are pinned at the bound
-              and the rest re-solved, PGS finishes if that does not settle) when every
-              row is two-sided; else PGS warm-started with last step's λ by row key
+    lam     = direct (tree elimination inside an active set: rows leaving their box are
+              pinned at the bound, released when they stop pushing on it; PGS finishes
+              if that does not settle) when every row is two-sided; else PGS
+              warm-started with last step's λ by row key
     v, pose = integrate (momentum form), project joints (only above 0.1 mm)
     q_sf    = rheology update with the solved velocity; warm keys sorted for the next step
 
@@ -16,9 +17,12 @@ monitor failure that must raise, a degenerate direct system).
 
 from __future__ import annotations
 
+import inspect
+
 import numpy as np
 from numba import njit
 
+from solver.direct import direct_solve
 from solver.fast.contacts import (
     collide_pointer,
     collide_scene,
@@ -46,7 +50,7 @@ OK, FALLBACK = 0, 1
 SOLVER_DIRECT, SOLVER_PGS = 0, 1
 METHOD_AUTO, METHOD_PGS, METHOD_DIRECT = 0, 1, 2
 MODE_NONE, MODE_GRIP, MODE_TOUCH = 0, 1, 2
-DIRECT_ROUNDS = 8  # solver.direct.direct_solve's rounds
+DIRECT_ROUNDS = inspect.signature(direct_solve).parameters["rounds"].default
 
 
 @njit(cache=True, error_model="numpy")
@@ -166,46 +170,47 @@ def _tree_pass(m, tree, ws, opt, rw, vel_free, free_grip, ngrip, body, lam):
 
 @njit(cache=True, error_model="numpy")
 def direct(m, tree, ws, opt, rw, n, vel_free, grip):
-    """(code, λ, v, residual) of the two-sided table (solver.direct.direct_solve): the tree
-    solve, then rows whose force leaves its box (the grip at its limit) are pinned at the
-    bound, their force folded into v_free, and the rest re-solved, ≤ DIRECT_ROUNDS times.
+    """(code, λ, v, residual) as solver.direct.direct_solve: a primal active set on the
+    box-QP.  Rows pinned at a bound (at_lo/at_hi) have their force folded into v_free and
+    the free rows are solved by the tree; a pinned row is released when its residual
+    r = J v + C λ + β no longer pushes against the bound (r > 0 at hi, r < 0 at lo), a
+    free row whose force leaves its box is pinned; ≤ DIRECT_ROUNDS rounds.
     code 0: settled; 1: not settled (λ clipped, PGS finishes); 2: degenerate (fall back)."""
     grip0, ngrip, body = grip
     lo, hi = rw[4], rw[5]
-    free_grip = np.arange(grip0, grip0 + ngrip)
-    pinned = np.zeros(n, dtype=np.bool_)
-    lam = np.zeros(n)
-    vf = vel_free.copy()
-    if not _tree_pass(m, tree, ws, opt, rw, vf, free_grip, ngrip, body, lam):
-        return 2, lam, vf, 0.0
+    at_lo, at_hi = np.zeros(n, dtype=np.bool_), np.zeros(n, dtype=np.bool_)
+    free_grip = np.empty(6, dtype=np.int64)
+    lam, r = np.zeros(n), np.zeros(n)
+    vel = vel_free.copy()
     for _ in range(DIRECT_ROUNDS):
-        out = False
-        for i in range(n):
-            if lam[i] < lo[i] or lam[i] > hi[i]:
-                if not grip0 <= i < grip0 + ngrip:
-                    return 2, lam, vf, 0.0
-                out, pinned[i] = True, True
-        vel = vel_free.copy()
-        if not out:
-            apply(rw, n, ws[1], ws[2], lam, vel)
-            residual = 0.0
-            for i in range(n):
-                if not pinned[i]:
-                    r = row_velocity(rw, i, vel) + rw[6][i] * lam[i] + rw[7][i]
-                    residual = max(residual, abs(r))
-            return 0, lam, vel, residual
         nfree = 0
         for i in range(grip0, grip0 + ngrip):
-            if pinned[i]:
-                lam[i] = min(max(lam[i], lo[i]), hi[i])
+            if at_lo[i] or at_hi[i]:
+                lam[i] = lo[i] if at_lo[i] else hi[i]
             else:
                 free_grip[nfree], nfree = i, nfree + 1
-        apply_rows(rw, pinned, ws[1], ws[2], lam, vel)
+        vel = vel_free.copy()
+        apply_rows(rw, at_lo | at_hi, ws[1], ws[2], lam, vel)
         if not _tree_pass(m, tree, ws, opt, rw, vel, free_grip, nfree, body, lam):
             return 2, lam, vel, 0.0
+        vel = vel_free.copy()
+        apply(rw, n, ws[1], ws[2], lam, vel)
+        changed, residual = False, 0.0
+        for i in range(n):
+            r[i] = row_velocity(rw, i, vel) + rw[6][i] * lam[i] + rw[7][i]
+            if (at_hi[i] and r[i] > 0.0) or (at_lo[i] and r[i] < 0.0):
+                at_lo[i], at_hi[i], changed = False, False, True
+            elif not (at_lo[i] or at_hi[i]):
+                residual = max(residual, abs(r[i]))
+                if lam[i] < lo[i] or lam[i] > hi[i]:
+                    if not grip0 <= i < grip0 + ngrip:
+                        return 2, lam, vel, 0.0
+                    at_lo[i], at_hi[i], changed = lam[i] < lo[i], lam[i] > hi[i], True
+        if not changed:
+            return 0, lam, vel, residual
     for i in range(n):
         lam[i] = min(max(lam[i], lo[i]), hi[i])
-    return 1, lam, vel_free, 0.0
+    return 1, lam, vel, 0.0
 
 
 @njit(cache=True, error_model="numpy")
@@ -295,7 +300,7 @@ def step_kernel(m, g, tree, ptree, ws, pws, opt, iopt, st, inp):
     status, lam, vel, iters, residual, used = solve(m, tree, ws, opt, iopt, st, n, vel_free, grip)
     if status or not state_ok(m, opt, pos, quat, vel[:, :3], vel[:, 3:]):
         return FALLBACK, out, none_k, none_l, rep_i, rep_f
-    integrate(m, opt[0], pos, quat, vel, rot, out[0], out[1], out[3], inertia_w, inv_i)
+    integrate(m, opt[0], pos, quat, vel, rot, out[0], out[1], out[3])
     if not project(m, ptree, pws, out[0], out[1]):
         return FALLBACK, out, none_k, none_l, rep_i, rep_f
     if not state_ok(m, opt, out[0], out[1], vel[:, :3], out[3]):

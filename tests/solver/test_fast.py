@@ -1,0 +1,243 @@
+"""The compiled step (solver.fast) against the numpy step, an independent implementation.
+
+Both run side by side from the same state with the same inputs; every step's state
+must agree to 1e-9 and every step's report must match.  Row forces (λ, joint torques,
+grip and touch forces) are compared to 1e-8 relative to the largest: the components of
+λ along nearly redundant rows (a body held by joint, limit and contact rows at once)
+are fixed only by the 10⁻⁶ regularisation, which amplifies rounding by ~10⁶, while the
+velocities they produce are not affected (measured: states ≤ 1e-11, forces ≤ 5e-10).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from paper_experiment import DD, DF, INERTIA, KF, T_END, T_LOAD, TAU, recursion
+from rigbuild import chain, one_bone, rheology
+
+from puppetcli.rigfile import load_rig
+from solver import quat
+from solver.errors import SimulationError
+from solver.fast import fast_step, supports
+from solver.fast.bench import scene_inputs
+from solver.grip import Pointer, make_coupling
+from solver.model import build_model
+from solver.observe import bone_points, joint_gaps, joint_rotations
+from solver.spec import BoneSpec, GroundSpec, RigSpec, ShapeSpec
+from solver.stabilize import project_joints
+from solver.state import StepInput, initial_state
+from solver.step import step
+
+DOLL = Path(__file__).resolve().parents[2] / "rigs" / "doll.yaml"
+TOL, FORCE_TOL = 1e-9, 1e-8
+STATE = ("body_pos", "body_quat", "body_vel", "body_omega", "joint_q_sf", "joint_anchor")
+FORCES = ("joint_torque_avg", "joint_torque", "warm_lam")
+
+
+def close(a, b, scale: bool = False) -> bool:
+    """|a − b| ≤ 1e-9, or with scale ≤ 1e-8·max(1, |a|) (forces)."""
+    a, b = np.asarray(a), np.asarray(b)
+    if a.shape != b.shape:
+        return False
+    bound = FORCE_TOL * max(1.0, float(np.max(np.abs(a), initial=0.0))) if scale else TOL
+    return bool(np.max(np.abs(a - b), initial=0.0) <= bound)
+
+
+def lockstep(model, state, inputs):
+    """Run both steps; assert agreement after every step; return the compiled reports."""
+    a = b = state
+    reports = []
+    for k, inp in enumerate(inputs):
+        a, ra = step(model, a, inp)
+        b, rb = fast_step(model, b, inp)
+        where = f"step {k}"
+        assert (ra.rows, ra.contacts, ra.iterations, ra.solver) == (
+            rb.rows,
+            rb.contacts,
+            rb.iterations,
+            rb.solver,
+        ), where
+        assert (a.time, a.step) == (b.time, b.step), where
+        assert np.array_equal(a.joint_yielded, b.joint_yielded), where
+        assert np.array_equal(a.warm_key, b.warm_key), where
+        for name in STATE:
+            assert close(getattr(a, name), getattr(b, name)), (where, name)
+        for name in FORCES:
+            assert close(getattr(a, name), getattr(b, name), scale=True), (where, name)
+        for name in ("grip_force", "grip_torque", "touch_force"):
+            assert close(getattr(ra, name), getattr(rb, name), scale=True), (where, name)
+        reports.append(rb)
+    return reports
+
+
+def test_creep_rig_matches_the_numpy_step():
+    h = 0.02
+    model = build_model(one_bone(h, KF, DF, DD, INERTIA))
+    loaded = StepInput(body_torque=np.array([[0.0, 0.0, TAU]]))
+    inputs = [loaded if k < round(T_LOAD / h) else None for k in range(round(T_END / h))]
+    reports = lockstep(model, initial_state(model), inputs)
+    assert {r.solver for r in reports} == {"direct"}
+
+
+@pytest.mark.parametrize("h", [0.02, 0.005])
+def test_fast_step_reproduces_the_exact_discrete_recursion(h):
+    model = build_model(one_bone(h, KF, DF, DD, INERTIA))
+    state = initial_state(model)
+    loaded = StepInput(body_torque=np.array([[0.0, 0.0, TAU]]))
+    angles = []
+    for k in range(round(T_END / h)):
+        state, _ = fast_step(model, state, loaded if k < round(T_LOAD / h) else None)
+        angles.append(joint_rotations(model, state)[0, 2])
+    assert np.max(np.abs(np.array(angles) - recursion(h))) < 1e-9
+
+
+def test_ten_link_chain_with_yield_grip_and_projection_matches():
+    # h = 5 ms and a grip near its force limit: joints yield and re-anchor, the direct
+    # solve's active set pins grip rows at their limits, the joint projection engages.
+    h = 0.005
+    model = build_model(chain(10, h, rheo=rheology(5.0, 0.5, 2.0, 0.8)))
+    state = initial_state(model)
+    tip = model.bone_tail0[9]
+    still = Pointer(tip, quat.IDENTITY.copy(), np.zeros(3), np.zeros(3))
+    grip = make_coupling(
+        state,
+        still,
+        9,
+        tip,
+        stiffness=500.0,
+        damping=5.0,
+        rot_stiffness=2.0,
+        rot_damping=0.05,
+        force_limit=8.0,
+        torque_limit=0.5,
+    )
+    velocity = np.array([0.0, 0.3, 0.1])
+    inputs = []
+    for k in range(300):
+        t = min((k + 1) * h, 1.0)
+        ptr = Pointer(tip + t * velocity, quat.IDENTITY.copy(), velocity, np.zeros(3))
+        inputs.append(StepInput(pointer=ptr, coupling=grip))
+    reports = lockstep(model, state, inputs)
+    assert {r.solver for r in reports} == {"direct"}
+    assert sum(np.abs(r.grip_force).max() == 8.0 for r in reports) > 100
+
+
+@pytest.mark.parametrize("root_mode", ["fixed", "free", "ball"])
+def test_chains_solved_directly_match(root_mode):
+    rng = np.random.default_rng(7)
+    n = 6
+    spec = chain(
+        n,
+        0.01,
+        root_mode=root_mode,
+        lengths=rng.uniform(0.05, 0.3, n),
+        rheo=rheology(2.0, 0.5, 3.0),
+    )
+    model = build_model(spec)
+    state = replace(initial_state(model), body_omega=rng.normal(size=(n, 3)))
+    reports = lockstep(model, state, [None] * 60)
+    assert {r.solver for r in reports} == {"direct"}
+
+
+def test_tumbling_chain_with_joint_projection_matches(monkeypatch):
+    # A free chain spinning at h = 10 ms opens joint gaps above 0.1 mm: the projection
+    # (post-stabilisation) engages in both implementations.
+    projected = []
+
+    def counting(model, pos, q, *args):
+        projected.append(joint_gaps(model, pos, q).max() > 1e-4)
+        return project_joints(model, pos, q, *args)
+
+    monkeypatch.setattr("solver.step.project_joints", counting)
+    spec = chain(4, 0.01, root_mode="free", gravity=(0, 0, 0), lengths=[0.3, 0.1, 0.4, 0.2])
+    model = build_model(spec)
+    omega = np.random.default_rng(0).normal(scale=3.0, size=(4, 3))
+    lockstep(model, replace(initial_state(model), body_omega=omega), [None] * 50)
+    assert sum(projected) >= 10
+
+
+def doll_inputs(model, steps: int) -> tuple:
+    """Push + grip for the first half (solver.fast.bench's scene), then a free-mode
+    pointer sphere pressing down on the left forearm."""
+    state, inputs = scene_inputs(model, steps // 2)
+    b = model.bone_names.index("forearm_l")
+    mid = 0.5 * (model.bone_head0[b] + model.bone_tail0[b])
+    top = bone_points(model, state, mid[None], bones=np.array([b]))[0] + [0.0, 0.05, 0.0]
+    down = np.array([0.0, -0.4, 0.0])
+    h = model.options.h
+    for k in range(steps - steps // 2):
+        pos = top + (k + 1) * h * down
+        inputs.append(
+            StepInput(pointer=Pointer(pos, quat.IDENTITY.copy(), down, np.zeros(3), radius=0.02))
+        )
+    return state, inputs
+
+
+def test_doll_with_contacts_push_grip_and_touch_matches():
+    model = build_model(load_rig(DOLL)).with_options(h=0.001)
+    assert supports(model)
+    state, inputs = doll_inputs(model, 500)
+    reports = lockstep(model, state, inputs)
+    assert min(r.contacts for r in reports) > 0
+    assert max(np.abs(r.grip_force).max() for r in reports[:250]) > 1.0
+    assert max(np.abs(r.touch_force).max() for r in reports[250:]) > 1.0
+
+
+def test_monitor_failures_raise_the_numpy_steps_error():
+    model = build_model(chain(3, 0.01)).with_options(max_speed=0.2)
+    state = initial_state(model)
+    with pytest.raises(SimulationError) as expected:
+        for _ in range(100):
+            state, _ = step(model, state)
+    state = initial_state(model)
+    with pytest.raises(SimulationError) as got:
+        for _ in range(100):
+            state, _ = fast_step(model, state)
+    assert str(got.value) == str(expected.value)
+    assert (got.value.step, got.value.bone) == (expected.value.step, expected.value.bone)
+
+
+def test_forced_direct_solver_on_contacts_raises_the_numpy_steps_error():
+    spec = chain(3, 0.01, collide=True, ground=0.99, method="direct")
+    model = build_model(spec)
+    with pytest.raises(SimulationError) as expected:
+        state = initial_state(model)
+        for _ in range(50):
+            state, _ = step(model, state)
+    with pytest.raises(SimulationError) as got:
+        state = initial_state(model)
+        for _ in range(50):
+            state, _ = fast_step(model, state)
+    assert str(got.value) == str(expected.value)
+
+
+def box_chain() -> RigSpec:
+    """Three box links on the ground: links 0 and 2 make a box–box pair of moving bodies."""
+    bones = tuple(
+        BoneSpec(
+            name=f"b{i}",
+            parent=f"b{i - 1}" if i else None,
+            head=np.array([0.12 * i, 0.1, 0.0]),
+            tail=np.array([0.12 * (i + 1), 0.1, 0.0]),
+            shape=ShapeSpec("box", half_extents=(0.03, 0.05, 0.03)),
+            mass=1.0,
+        )
+        for i in range(3)
+    )
+    return RigSpec(name="boxes", bones=bones, root_mode="free", ground=GroundSpec())
+
+
+def test_supports_declines_what_is_not_compiled_and_numpy_still_runs():
+    reference = build_model(chain(3, 0.01)).with_options(method="reference")
+    boxes = build_model(box_chain())
+    assert not supports(reference)
+    assert not supports(boxes)
+    assert supports(build_model(chain(3, 0.01)))
+    for model in (reference, boxes):
+        state = initial_state(model)
+        a, ra = step(model, state)
+        b, rb = fast_step(model, state)  # delegates to the numpy step
+        assert np.array_equal(a.body_pos, b.body_pos) and ra.solver == rb.solver

@@ -1,0 +1,167 @@
+"""Compiled kernels against their numpy counterparts: narrow phase, and the tree solve
+against the dense Cholesky and scipy."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+import scipy.linalg
+from rigbuild import chain, rheology
+
+from solver import collide, quat
+from solver.fast.contacts import collide_pointer, collide_scene, world_shapes
+from solver.fast.pack import pack
+from solver.fast.tree import dense_solve, node_rows, tree_solve
+from solver.model import build_model
+from solver.response import dense_system, regularize, row_response, world_inverse_inertia
+from solver.spec import BoneSpec, GroundSpec, PropSpec, RigSpec, ShapeSpec
+from solver.state import initial_state
+from solver.step import build_rows
+from solver.touch import pointer_contacts
+
+CAPSULE = ShapeSpec("capsule", radius=0.04)
+SPHERE = ShapeSpec("sphere", radius=0.05)
+BOX = ShapeSpec("box", half_extents=(0.08, 0.05, 0.12))
+
+
+def mixed_scene() -> RigSpec:
+    """Ground, static capsule and sphere props, dynamic spheres, capsules and one box."""
+    root = BoneSpec("root", None, np.zeros(3), np.array([0.0, 0.2, 0.0]), CAPSULE, 1.0)
+    r0 = np.array([1.0, 0.0, 0.0, 0.0])
+
+    def prop(name, shape, dynamic, pos):
+        return PropSpec(name, shape, np.array(pos, float), r0, dynamic=dynamic, friction=0.4)
+
+    def apart(i):  # rest poses apart, so no pair is dropped as overlapping at rest
+        return (1.0 + 0.5 * i, 1.0, 0.0)
+
+    props = (
+        prop(
+            "pole",
+            ShapeSpec("capsule", radius=0.05, half_extents=(0, 0.15, 0)),
+            False,
+            (0.1, 0.1, 0.0),
+        ),
+        prop("ball", SPHERE, False, (-0.1, 0.1, 0.1)),
+        prop("s1", SPHERE, True, apart(0)),
+        prop("s2", SPHERE, True, apart(1)),
+        prop("c1", ShapeSpec("capsule", radius=0.03, half_extents=(0, 0.1, 0)), True, apart(2)),
+        prop("c2", ShapeSpec("capsule", radius=0.06, half_extents=(0, 0.05, 0)), True, apart(3)),
+        prop("box", BOX, True, apart(4)),
+    )
+    return RigSpec("mixed", (root,), root_mode="free", ground=GroundSpec(0.0, 0.7), props=props)
+
+
+def assert_same_contacts(expected: collide.Contacts, cb: tuple, n: int, offset: int = 0):
+    assert n == len(expected.key)
+    assert np.array_equal(cb[6][:n], expected.key + offset)
+    assert np.array_equal(cb[0][:n], expected.body_a)
+    assert np.array_equal(cb[1][:n], expected.body_b)
+    assert np.array_equal(cb[5][:n], expected.friction)
+    for got, want in ((cb[2], expected.point), (cb[3], expected.normal), (cb[4], expected.depth)):
+        assert np.abs(got[:n] - want).max(initial=0.0) < 1e-12
+
+
+@pytest.mark.parametrize("seed", range(12))
+def test_narrow_phase_equals_numpy_collide(seed):
+    rng = np.random.default_rng(seed)
+    model = build_model(mixed_scene())
+    fm = pack(model)
+    g, cb, centre, rot = fm.g, fm.ws[4], fm.ws[8], fm.ws[9]
+    nb = model.nbody
+    pos = rng.uniform([-0.2, -0.02, -0.2], [0.2, 0.25, 0.2], size=(nb, 3))
+    q = quat.normalize(rng.normal(size=(nb, 4)))
+    if seed % 3 == 0:  # axis-aligned poses: parallel and face-on configurations
+        q = np.tile(quat.IDENTITY, (nb, 1))
+    for margin in (0.0, 0.01, 0.1):
+        world_shapes(g, pos, q, centre, rot)
+        n = collide_scene(g, centre, rot, margin, cb)
+        assert_same_contacts(collide.collide(model.geometry, pos, q, margin), cb, n)
+    state = replace(initial_state(model), body_pos=pos, body_quat=q)
+    for radius in (0.02, 0.1):
+        centre_p = rng.uniform(-0.15, 0.15, 3) + [0.0, 0.1, 0.0]
+        n = collide_pointer(g, centre, rot, centre_p, radius, 0.01, cb, 0)
+        expected = pointer_contacts(
+            model.with_options(contact_margin=0.01), state, centre_p, radius
+        )
+        assert_same_contacts(expected, cb, n)
+
+
+def test_box_box_within_reach_is_declined():
+    model = build_model(mixed_scene())
+    fm = pack(model)
+    pos = np.zeros((model.nbody, 3))
+    q = np.tile(quat.IDENTITY, (model.nbody, 1))
+    g, cb, centre, rot = fm.g, fm.ws[4], fm.ws[8], fm.ws[9]
+    world_shapes(g, pos, q, centre, rot)
+    assert collide_scene(g, centre, rot, 0.01, cb) >= 0  # one box only: nothing to decline
+    boxes = replace(
+        mixed_scene(),
+        props=mixed_scene().props
+        + (
+            PropSpec(
+                "box2", BOX, np.array([4.0, 1.0, 0.0]), np.array([1.0, 0, 0, 0]), dynamic=True
+            ),
+        ),
+    )
+    fm2 = pack(build_model(boxes))
+    assert fm2.reason is not None
+    pos2, q2 = np.zeros((len(pos) + 1, 3)), np.tile(quat.IDENTITY, (len(pos) + 1, 1))
+    pos2[-2:] = [[0.0, 1.0, 0.0], [0.1, 1.0, 0.0]]  # the two boxes overlap
+    world_shapes(fm2.g, pos2, q2, fm2.ws[8], fm2.ws[9])
+    assert collide_scene(fm2.g, fm2.ws[8], fm2.ws[9], 0.01, fm2.ws[4]) == -1
+
+
+@pytest.mark.parametrize("root_mode", ["free", "fixed", "ball"])
+def test_tree_and_dense_solves_equal_scipy_on_a_joint_table(root_mode):
+    rng = np.random.default_rng(3)
+    model = build_model(chain(7, 0.01, root_mode=root_mode, rheo=rheology(2.0, 0.5, 3.0)))
+    state = replace(initial_state(model), body_omega=rng.normal(size=(7, 3)))
+    rot = quat.matrix(state.body_quat)
+    inv_i = world_inverse_inertia(model.body_inv_inertia, rot)
+    vel_free = np.hstack((state.body_vel, state.body_omega))
+    rows, _, _ = build_rows(model, state, rot, vel_free)
+    resp = row_response(rows, model.body_inv_mass, inv_i, model.options.h)
+    rows = regularize(rows, resp, model.options.regularization)
+    q, c = dense_system(rows, resp, vel_free)
+    expected = scipy.linalg.solve(q, -c, assume_a="pos")
+    rw = (
+        rows.body_a,
+        rows.body_b,
+        rows.jac_a,
+        rows.jac_b,
+        rows.lo,
+        rows.hi,
+        rows.comp,
+        rows.bias,
+        rows.fric_of,
+        rows.mu,
+        rows.key,
+        rows.kind.astype(np.int64),
+    )
+    lam = np.zeros(len(rows))
+    assert dense_solve(rw, resp[0], resp[1], len(rows), vel_free, lam)
+    assert np.abs(lam - expected).max() < 1e-9 * np.abs(expected).max()
+    order, parent, rheo_start, _, _, node_rows_, size, tw = pack(model).tree
+    for i in order:
+        size[i] = node_rows(i, model.nbody, rheo_start, node_rows_[i])
+    inertia_w = rot @ model.body_inertia @ np.swapaxes(rot, 1, 2)
+    lam = np.zeros(len(rows))
+    assert tree_solve(
+        order,
+        len(order),
+        parent,
+        model.nbody,
+        rw,
+        vel_free,
+        model.options.h,
+        model.body_mass,
+        inertia_w,
+        node_rows_,
+        size,
+        tw,
+        lam,
+    )
+    assert np.abs(lam - expected).max() < 1e-9 * np.abs(expected).max()
