@@ -1,7 +1,10 @@
 """Benchmarks: steps per second of the solvers on example scenes, in one run.
 
 Speed is reported as a ratio against a baseline measured in the same run (the
-paper's setting: PGS, 15 iterations, warm start), never as an absolute pass/fail.
+paper's setting: PGS, 15 iterations, warm start, on the numpy step), never as an
+absolute pass/fail.  Each solver runs on both engines: `numpy` (solver.step.step,
+the readable reference implementation) and `fast` (solver.fast.fast_step, the
+compiled step the CLI uses).
 Each configuration first takes a few untimed steps (JIT compilation, caches),
 then is timed over a fixed simulated duration.
 """
@@ -18,6 +21,7 @@ from puppetcli.rigfile import load_rig
 from puppetcli.script import Push
 from puppetcli.snapshot import push_input
 from solver.errors import SimulationError
+from solver.fast import fast_step
 from solver.model import Model, build_model
 from solver.state import initial_state
 from solver.step import step
@@ -34,6 +38,7 @@ class BenchRow:
     scene: str
     h: float
     solver: str
+    engine: str
     steps: int
     seconds: float
     steps_per_s: float
@@ -58,18 +63,22 @@ ARM_PUSH = Push(
 )
 
 
-def time_run(model: Model, seconds: float) -> tuple[int, float, float]:
+ENGINES = {"numpy": step, "fast": fast_step}
+
+
+def time_run(model: Model, seconds: float, engine: str = "numpy") -> tuple[int, float, float]:
     """(steps, wall seconds, mean contacts): the doll's arm pushed up for 0.3 s, then settling."""
+    step_fn = ENGINES[engine]
     state = initial_state(model)
     for _ in range(WARMUP_STEPS):
-        state, _ = step(model, state)
+        state, _ = step_fn(model, state)
     state = initial_state(model)
     n = max(1, round(seconds / model.options.h))
     contacts = 0
     start = time.perf_counter()
     for _ in range(n):
         inp = push_input(model, state, ARM_PUSH) if state.time < ARM_PUSH.duration else None
-        state, report = step(model, state, inp)
+        state, report = step_fn(model, state, inp)
         contacts += report.contacts
     return n, time.perf_counter() - start, contacts / n
 
@@ -77,41 +86,47 @@ def time_run(model: Model, seconds: float) -> tuple[int, float, float]:
 def measure(
     scenes: dict[str, Model], steps_h: list[float], solvers: list[str], seconds: float
 ) -> list[BenchRow]:
-    """Every (scene, h, solver), with the ratio to the PGS baseline at the same scene and h."""
+    """Every (scene, h, solver, engine), with the ratio to numpy PGS at the same scene and h."""
     rows = []
     for name, model in scenes.items():
         for h in steps_h:
             base = None
             for solver in [BASELINE] + [s for s in solvers if s != BASELINE]:
-                if solver == "direct" and (model.has_collision or model.has_limits):
-                    rows.append(
-                        BenchRow(name, h, solver, 0, 0.0, 0.0, 0.0, 0.0, "n/a: contacts/limits")
-                    )
-                    continue
-                m = model.with_options(h=h, method=solver, iterations=15, warm_start=True)
-                span = seconds if solver != "reference" else min(seconds, 20 * h)
-                try:
-                    n, wall, contacts = time_run(m, span)
-                except SimulationError as exc:
-                    rows.append(BenchRow(name, h, solver, 0, 0.0, 0.0, 0.0, 0.0, str(exc)[:60]))
-                    continue
-                rate = n / wall
-                base = rate if solver == BASELINE else base
-                rows.append(BenchRow(name, h, solver, n, wall, rate, rate / base, contacts))
+                for engine in ENGINES:
+                    row = _measure_one(name, model, h, solver, engine, seconds, base)
+                    base = row.steps_per_s if base is None else base
+                    rows.append(row)
     return rows
+
+
+def _measure_one(
+    name: str, model: Model, h: float, solver: str, engine: str, seconds: float, base
+) -> BenchRow:
+    if solver == "direct" and (model.has_collision or model.has_limits):
+        return BenchRow(name, h, solver, engine, 0, 0.0, 0.0, 0.0, 0.0, "n/a: contacts/limits")
+    if engine == "fast" and solver == "reference":
+        return BenchRow(name, h, solver, engine, 0, 0.0, 0.0, 0.0, 0.0, "n/a: numpy only")
+    m = model.with_options(h=h, method=solver, iterations=15, warm_start=True)
+    span = seconds if solver != "reference" else min(seconds, 20 * h)
+    try:
+        n, wall, contacts = time_run(m, span, engine)
+    except SimulationError as exc:
+        return BenchRow(name, h, solver, engine, 0, 0.0, 0.0, 0.0, 0.0, str(exc)[:60])
+    rate = n / wall
+    return BenchRow(name, h, solver, engine, n, wall, rate, rate / (base or rate), contacts)
 
 
 def format_table(rows: list[BenchRow]) -> str:
     """A fixed-width table of the rows."""
     head = (
-        f"{'scene':<12} {'h (s)':>7} {'solver':<10} {'steps':>6} {'steps/s':>10} "
-        f"{'× pgs':>7} {'contacts':>8}  note"
+        f"{'scene':<12} {'h (s)':>7} {'solver':<10} {'engine':<6} {'steps':>6} {'steps/s':>10} "
+        f"{'× numpy pgs':>11} {'contacts':>8}  note"
     )
     lines = [head, "-" * len(head)]
     for r in rows:
         lines.append(
-            f"{r.scene:<12} {r.h:>7g} {r.solver:<10} {r.steps:>6} {r.steps_per_s:>10,.0f} "
-            f"{r.ratio:>7.2f} {r.contacts:>8.1f}  {r.note}"
+            f"{r.scene:<12} {r.h:>7g} {r.solver:<10} {r.engine:<6} {r.steps:>6} "
+            f"{r.steps_per_s:>10,.0f} {r.ratio:>11.2f} {r.contacts:>8.1f}  {r.note}"
         )
     return "\n".join(lines)
 

@@ -3,7 +3,9 @@
 Actions run one after another on one timeline.  A timed action (push, wait, move,
 touch, rotate, twist) ends at its start time plus its duration; the simulation
 steps while t < t_end − h/2, so durations that are not multiples of h do not
-accumulate rounding.  The pointer keeps its last pose between motions, and a
+accumulate rounding.  Steps run on the compiled step (solver.fast.fast_step,
+identical to solver.step.step to rounding, which it falls back to for anything it
+does not handle).  The pointer keeps its last pose between motions, and a
 grip holds through waits and pushes until `release`.  A key captures the state
 when it is reached.  If the simulation fails, the keys and expectation results
 so far are returned with the error, and the trace keeps every step written.
@@ -33,6 +35,7 @@ from puppetcli.script_actions import Expect, Grip, Move, Release, Rotate, Touch,
 from puppetcli.snapshot import capture, push_input
 from solver import quat
 from solver.errors import SimulationError
+from solver.fast import fast_step
 from solver.grip import (
     Coupling,
     Pointer,
@@ -44,7 +47,6 @@ from solver.grip import (
 from solver.model import Model
 from solver.observe import bone_points
 from solver.state import State, StepInput, StepReport, initial_state
-from solver.step import step
 
 POINTER_ACTIONS = (Grip, Move, Rotate, Twist, Release, Touch)
 EVENT_SLACK = 1e-9  # s: an event "at" a step boundary despite float rounding of the time
@@ -227,7 +229,7 @@ class Runner:
         t_end = self.state.time + duration
         while self.state.time < t_end - 0.5 * h:
             inp = self._input(push)
-            self.state, report = step(self.model, self.state, inp)
+            self.state, report = fast_step(self.model, self.state, inp)
             self._after_step(inp, report)
 
     def _input(self, push: Push | None) -> StepInput:

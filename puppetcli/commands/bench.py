@@ -52,8 +52,9 @@ def command(
     Scenes: `doll` (rigs/doll.yaml: ground contacts, limits, rheology, the left
     forearm pushed up for 0.3 s) and `doll-joints` (the same doll without ground
     or limits: equality rows only, where the direct solver applies).  The ratio
-    column is against PGS (15 iterations, warm start) at the same scene and step,
-    measured in the same run.
+    column is against PGS (15 iterations, warm start) on the numpy step at the same
+    scene and step, measured in the same run; every solver runs on both engines
+    (numpy: the reference implementation; fast: the compiled step the CLI uses).
     """
     rows = measure(doll_scenes(), list(steps_h), list(solvers), seconds)
     click.echo(format_table(rows))
