@@ -18,6 +18,7 @@ import numpy as np
 from solver import quat
 from solver.fast import fast_step
 from solver.fast.pack import fast_model
+from solver.fast.rows import row_arrays
 from solver.fast.tree import dense_solve, node_rows, tree_solve
 from solver.grip import Pointer, make_coupling
 from solver.integrate import free_velocity
@@ -130,20 +131,7 @@ def direct_solvers(model: Model, calls: int = 2000) -> dict[str, float]:
     rows = regularize(rows, resp, model.options.regularization)
     if not rows.bilateral:
         raise ValueError("the direct solvers need a table of two-sided rows only")
-    rw = (
-        rows.body_a,
-        rows.body_b,
-        rows.jac_a,
-        rows.jac_b,
-        rows.lo,
-        rows.hi,
-        rows.comp,
-        rows.bias,
-        rows.fric_of,
-        rows.mu,
-        rows.key,
-        rows.kind.astype(np.int64),
-    )
+    rw = row_arrays(rows)
     order, parent, rheo_start, _, _, node_rows_, size, tw = fast_model(model).tree
     for i in order:
         size[i] = node_rows(i, model.nbody, rheo_start, node_rows_[i])

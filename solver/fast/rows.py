@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import math
 
+import numpy as np
 from numba import njit
 
 from solver.fast.kin import (
@@ -41,6 +42,14 @@ from solver.rows import KEY_SHIFT, KIND_JOINT, KIND_LIMIT, KIND_RHEOLOGY
 INF = math.inf
 ZERO = (0.0, 0.0, 0.0)
 AXES = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+
+
+def row_arrays(rows) -> tuple:
+    """A ``solver.rows.Rows`` table as the tuple the kernels take (``rw``), in field order."""
+    return (
+        rows.body_a, rows.body_b, rows.jac_a, rows.jac_b, rows.lo, rows.hi, rows.comp,
+        rows.bias, rows.fric_of, rows.mu, rows.key, rows.kind.astype(np.int64),
+    )  # fmt: skip
 
 
 @njit(cache=True, error_model="numpy")

@@ -13,6 +13,7 @@ from rigbuild import chain, rheology
 from solver import collide, quat
 from solver.fast.contacts import collide_pointer, collide_scene, world_shapes
 from solver.fast.pack import pack
+from solver.fast.rows import row_arrays
 from solver.fast.tree import dense_solve, node_rows, tree_solve
 from solver.model import build_model
 from solver.response import dense_system, regularize, row_response, world_inverse_inertia
@@ -127,20 +128,7 @@ def test_tree_and_dense_solves_equal_scipy_on_a_joint_table(root_mode):
     rows = regularize(rows, resp, model.options.regularization)
     q, c = dense_system(rows, resp, vel_free)
     expected = scipy.linalg.solve(q, -c, assume_a="pos")
-    rw = (
-        rows.body_a,
-        rows.body_b,
-        rows.jac_a,
-        rows.jac_b,
-        rows.lo,
-        rows.hi,
-        rows.comp,
-        rows.bias,
-        rows.fric_of,
-        rows.mu,
-        rows.key,
-        rows.kind.astype(np.int64),
-    )
+    rw = row_arrays(rows)
     lam = np.zeros(len(rows))
     assert dense_solve(rw, resp[0], resp[1], len(rows), vel_free, lam)
     assert np.abs(lam - expected).max() < 1e-9 * np.abs(expected).max()
