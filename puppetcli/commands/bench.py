@@ -49,9 +49,9 @@ def command(
 ) -> None:
     """Measure steps per second of the solvers on example scenes.
 
-    Scenes: `doll` (rigs/doll.yaml: ground contacts, limits, rheology, the left
-    forearm pushed up for 0.3 s) and `doll-joints` (the same doll without ground
-    or limits: equality rows only, where the direct solver applies).  The ratio
+    Scenes: `doll` (rigs/doll.yaml: ground contacts, limits, rheology, a grip lifting
+    the left forearm along a minimum-jerk path) and `doll-joints` (the same doll
+    without ground or limits: two-sided rows only, where the direct solver applies).  The ratio
     column is against PGS (15 iterations, warm start) on the numpy step at the same
     scene and step, measured in the same run; every solver runs on both engines
     (numpy: the reference implementation; fast: the compiled step the CLI uses).
