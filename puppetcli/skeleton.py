@@ -13,7 +13,6 @@ import numpy as np
 
 from puppetcli.keyframes import Keyframe
 from solver import quat
-from solver.model import Model
 from solver.spec import RigSpec
 
 
@@ -41,20 +40,6 @@ class Skeleton:
             shape=tuple(b.shape.kind for b in spec.bones),
             radius=np.array([b.shape.radius for b in spec.bones], dtype=float),
             half=np.array([b.shape.half_extents for b in spec.bones], dtype=float),
-        )
-
-    @classmethod
-    def from_model(cls, model: Model) -> Skeleton:
-        """Without shapes (radius 0, capsules): for writers that need only the tree."""
-        n = len(model.bone_names)
-        return cls(
-            names=model.bone_names,
-            parents=model.bone_parent.copy(),
-            head0=model.bone_head0.copy(),
-            tail0=model.bone_tail0.copy(),
-            shape=("capsule",) * n,
-            radius=np.zeros(n),
-            half=np.zeros((n, 3)),
         )
 
     @property
