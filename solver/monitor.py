@@ -17,7 +17,7 @@ def check_state(
     opt = model.options
     finite = np.isfinite(pos).all(1) & np.isfinite(q).all(1) & np.isfinite(vel).all(1)
     if not finite.all():
-        body = int(np.flatnonzero(~finite)[0])
+        body = _first_broken(model, ~finite)
         raise SimulationError(
             "state became non-finite (NaN or infinity)", step, time, model.body_names[body]
         )
@@ -44,3 +44,10 @@ def check_state(
                 time,
                 model.joint_names[j],
             )
+
+
+def _first_broken(model: Model, broken: np.ndarray) -> int:
+    """The first broken movable body; a fixed body only when no movable one is broken
+    (an infinite force turns a fixed root's 0·∞ into NaN too, but the cause is elsewhere)."""
+    movable = broken & (model.body_inv_mass > 0.0)
+    return int(np.flatnonzero(movable if movable.any() else broken)[0])
