@@ -37,7 +37,7 @@ from solver.spec import (
 
 __all__ = ["SOLVER_METHODS", "load_rig", "rig_from_text", "solver_overrides"]
 
-SOLVER_METHODS = ("auto", "pgs", "direct", "reference")
+SOLVER_METHODS = ("auto", "pgs", "hybrid", "direct", "reference")
 DEFAULT_DENSITY = 1000.0  # kg/m³, water: a plausible body density
 TOP_KEYS = ("name", "gravity", "ground", "root", "friction", "solver", "defaults", "bones", "props")
 DEFAULTS_KEYS = ("shape", "density", "joint")

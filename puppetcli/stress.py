@@ -31,11 +31,11 @@ from puppetcli.rigfile import load_rig
 from solver import stress_cases as sc
 from solver.collide import collide
 from solver.errors import SimulationError
+from solver.fast import fast_step as step
 from solver.model import build_model
 from solver.observe import joint_gaps, momentum
 from solver.spec import ShapeSpec
 from solver.state import State, initial_state
-from solver.step import step
 
 MOMENTUM_TOL = 1e-9
 """Relative: without loads the step conserves momentum to round-off (tests/solver)."""
@@ -144,8 +144,11 @@ def _rel(x: np.ndarray, x0: np.ndarray) -> float:
     return float(np.linalg.norm(x - x0)) / scale if scale > 0.0 else float(np.linalg.norm(x))
 
 
-def run_scene(scene: sc.Scene) -> CaseResult:
-    """Simulate a scene for its duration and measure it (see the module docstring)."""
+def run_scene(scene: sc.Scene, method: str | None = None) -> CaseResult:
+    """Simulate a scene for its duration and measure it (see the module docstring);
+    ``method``: a solver method instead of the scene's own."""
+    if method is not None:
+        scene = replace(scene, model=scene.model.with_options(method=method))
     model = scene.model
     meter = _Meter(scene)
     state = scene.start
@@ -182,7 +185,7 @@ def _problems(r: CaseResult, scene: sc.Scene) -> list[str]:
     return out
 
 
-def run_random(seed: int) -> CaseResult:
+def run_random(seed: int, method: str | None = None) -> CaseResult:
     """One random rig (solver.stress_cases.random_scene); building it may crash too."""
     try:
         scene = sc.random_scene(seed)
@@ -190,7 +193,7 @@ def run_random(seed: int) -> CaseResult:
         res = CaseResult(f"random-{seed}", crash=f"{type(exc).__name__}: {exc} (building)")
         res.problems = [f"crash: {res.crash}"]
         return res
-    return run_scene(scene)
+    return run_scene(scene, method)
 
 
 def summarize(name: str, results: list[CaseResult]) -> CaseResult:
@@ -389,20 +392,24 @@ RANDOM_SEEDS = 100
 
 
 def run_cases(
-    names: list[str], seeds: list[int], tick: Callable[[], None] | None = None
+    names: list[str],
+    seeds: list[int],
+    tick: Callable[[], None] | None = None,
+    method: str | None = None,
 ) -> list[CaseResult]:
     """One result per named case, then the random rigs of ``seeds`` as one summary row
-    (or as their own row for a single seed).  ``tick`` is called after every run."""
+    (or as their own row for a single seed).  ``tick`` is called after every run;
+    ``method``: a solver method for every scene instead of its own."""
     tick = tick or (lambda: None)
     out = []
     for name in names:
         if name != RANDOM:
-            out.append(run_scene(CASES[name]()))
+            out.append(run_scene(CASES[name](), method))
             tick()
     if RANDOM in names and seeds:
         runs = []
         for seed in seeds:
-            runs.append(run_random(seed))
+            runs.append(run_random(seed, method))
             tick()
         out.append(runs[0] if len(runs) == 1 else summarize(f"random×{len(runs)}", runs))
     return out

@@ -117,10 +117,13 @@ def candidate_pairs(
     body_pos: np.ndarray,
     body_quat: np.ndarray,
     exclude_rest_overlap: bool = True,
+    body_movable: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Shape pairs (pair_a, pair_b) that may ever touch, sorted by (a, b).
 
-    Excluded: two static shapes, two shapes of one body, shapes of a parent and
+    Excluded: two static shapes, two shapes that cannot move (static or of immovable
+    bodies, body_movable (nb,) bool; a fixed root on the ground has no contact to solve:
+    its rows would have no response), two shapes of one body, shapes of a parent and
     its child (body_parent (nb,), −1 for roots), and — with ``exclude_rest_overlap``
     — two body shapes already overlapping (depth > REST_OVERLAP) in the pose
     body_pos (nb,3), body_quat (nb,4), as rig capsules do around a joint.  A body
@@ -131,7 +134,9 @@ def candidate_pairs(
     bi, bj = shape_body[i], shape_body[j]
     parent = np.append(np.asarray(body_parent, dtype=np.int64), -2)  # index −1 → no parent
     linked = (bi >= 0) & (bj >= 0) & ((parent[bi] == bj) | (parent[bj] == bi))
-    keep = ((bi >= 0) | (bj >= 0)) & (bi != bj) & ~linked
+    moves = np.append(np.ones(len(parent) - 1, bool) if body_movable is None else body_movable,
+                      False)  # fmt: skip
+    keep = (moves[bi] | moves[bj]) & (bi != bj) & ~linked
     i, j, static_j = i[keep], j[keep], bj[keep] < 0
     a, b = np.where(static_j, j, i), np.where(static_j, i, j)
     order = np.lexsort((b, a))

@@ -29,9 +29,11 @@ SHAPE_CODE = {"sphere": 1, "capsule": 2, "box": 3}
 class Options:
     """Solver and safety settings.
 
-    h: step (s).  method: "auto" | "pgs" | "direct" | "reference".
-    iterations: PGS sweeps.  warm_start / warm_start_factor: reuse of the previous
-    step's row forces.  gravity: (3,) m/s².
+    h: step (s).  method: "auto" | "pgs" | "hybrid" | "direct" | "reference"
+    (auto: direct when every row is two-sided, else hybrid).
+    iterations: PGS sweeps (over the whole table for pgs, over the bounded rows'
+    Schur complement for hybrid).  warm_start / warm_start_factor: reuse of the
+    previous step's row forces.  gravity: (3,) m/s².
     joint_erp: fraction of a joint's anchor gap removed per step (Baumgarte).
     contact_erp, contact_slop (m): penetration correction beyond the slop.
     contact_margin (m): gaps below this produce speculative contact rows.
@@ -45,6 +47,8 @@ class Options:
         norm compared with the yield torque.
     max_speed (m/s), max_angular_speed (rad/s), max_joint_gap (m): beyond these
         the simulation is declared numerically broken.
+    max_substeps: most equal substeps a step may take when its joints' geometric
+        stiffness needs them (solver.substep); 1 = never subdivide.
     """
 
     h: float = 0.005
@@ -63,6 +67,7 @@ class Options:
     max_speed: float = 100.0
     max_angular_speed: float = 1000.0
     max_joint_gap: float = 0.05
+    max_substeps: int = 64
 
 
 @dataclass(frozen=True)
@@ -178,7 +183,7 @@ def build_model(spec: RigSpec) -> Model:
 
     bone_parent = np.array([index[b.parent] if b.parent else -1 for b in bones], dtype=np.int64)
     joints = _joint_arrays(spec, bone_parent, pos0)
-    geometry = _geometry(spec, bone_parent, pos0, quat0, nbone)
+    geometry = _geometry(spec, bone_parent, pos0, quat0, nbone, movable)
     s = spec.solver
     options = Options(
         h=s.h,
@@ -264,7 +269,12 @@ def _joint_arrays(spec: RigSpec, bone_parent: np.ndarray, pos0: np.ndarray) -> d
 
 
 def _geometry(
-    spec: RigSpec, bone_parent: np.ndarray, pos0: np.ndarray, quat0: np.ndarray, nbone: int
+    spec: RigSpec,
+    bone_parent: np.ndarray,
+    pos0: np.ndarray,
+    quat0: np.ndarray,
+    nbone: int,
+    movable: np.ndarray,
 ) -> collide.Geometry:
     """Collision shapes of bones, props and the ground, and the pairs that can touch."""
     body, kind, centre, orient, radius, half, mu = [], [], [], [], [], [], []
@@ -335,6 +345,7 @@ def _geometry(
     else:
         shapes = {k: v for k, v in arrays.items() if k != "shape_friction"}
         pair_a, pair_b = collide.candidate_pairs(
-            **shapes, body_parent=body_parent, body_pos=pos0, body_quat=quat0
-        )
+            **shapes, body_parent=body_parent, body_pos=pos0, body_quat=quat0,
+            body_movable=movable,
+        )  # fmt: skip
     return collide.Geometry(**arrays, pair_a=pair_a, pair_b=pair_b)

@@ -91,3 +91,47 @@ def pgs_solve(
         target = min(max(lam[i] - r / diag[i], lo_i), hi_i)
         residual = max(residual, abs(lam[i] - target) * diag[i])
     return lam, vel, sweeps, residual
+
+
+@njit(cache=True)
+def dense_pgs(q, c, lo, hi, fric_of, mu, lam0, iterations, tol):
+    """Projected Gauss–Seidel on a dense mixed LCP r = Qλ + c (Q symmetric, Q_ii > 0).
+
+    The same projection as ``pgs_solve`` (friction rows bounded by ±μ·λ of their normal
+    row, fric_of indexing into this system), sweeping the rows in order with the full
+    row of Q.  Returns (λ, sweeps, residual), the residual as in ``pgs_solve``:
+    max_i |λ_i − proj(λ_i − r_i/Q_ii)|·Q_ii.
+    """
+    n = len(c)
+    lam = lam0.copy()
+    r = c.copy()
+    for i in range(n):
+        if lam[i] != 0.0:
+            for k in range(n):
+                r[k] += q[k, i] * lam[i]
+    sweeps = 0
+    for _ in range(iterations):
+        sweeps += 1
+        change = 0.0
+        for i in range(n):
+            d = q[i, i] if q[i, i] > 1e-300 else 1e-300
+            lo_i, hi_i = _bounds(i, lam, lo, hi, fric_of, mu)
+            new = min(max(lam[i] - r[i] / d, lo_i), hi_i)
+            dlam = new - lam[i]
+            if dlam != 0.0:
+                for k in range(n):
+                    r[k] += q[k, i] * dlam
+                lam[i] = new
+                change = max(change, abs(dlam) * d)
+        if change < tol:
+            break
+    residual = 0.0
+    for i in range(n):
+        ri = c[i]  # recomputed, not the running sum: the residual is the solution's own
+        for k in range(n):
+            ri += q[i, k] * lam[k]
+        lo_i, hi_i = _bounds(i, lam, lo, hi, fric_of, mu)
+        d = q[i, i] if q[i, i] > 1e-300 else 1e-300
+        target = min(max(lam[i] - ri / d, lo_i), hi_i)
+        residual = max(residual, abs(lam[i] - target) * d)
+    return lam, sweeps, residual

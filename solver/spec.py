@@ -138,7 +138,8 @@ class GroundSpec:
 class SolverSpec:
     """Solver options as a rig or script states them.
 
-    h: step (s).  method: "auto" | "pgs" | "direct" | "reference".
+    h: step (s).  method: "auto" | "pgs" | "hybrid" | "direct" | "reference"
+    (auto: direct when every row is two-sided, else hybrid).
     iterations: PGS sweeps.  warm_start: reuse the previous step's impulses.
     warm_start_factor: scale on the reused impulses (1.0 = all of it; the
         reference implementation used 0.7).

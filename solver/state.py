@@ -68,6 +68,9 @@ class StepReport:
     grip_force (3,) N, grip_torque (3,) N·m: the coupling's wrench on the gripped
     bone (torque about the grip point); touch_force (3,) N: the pointer's contact
     force on the bones in free mode.  The user's hand feels their opposite.
+    substeps: how many equal substeps the step took (solver.substep); with more than
+    one, rows and contacts are the last substep's, iterations their sum, the residual
+    their worst and the wrenches their mean.
     """
 
     rows: int
@@ -78,6 +81,7 @@ class StepReport:
     grip_force: np.ndarray = field(default_factory=lambda: np.zeros(3))
     grip_torque: np.ndarray = field(default_factory=lambda: np.zeros(3))
     touch_force: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    substeps: int = 1
 
 
 def initial_state(model: Model) -> State:

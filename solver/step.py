@@ -3,7 +3,11 @@
 frames   = kinematics(model, state)
 contacts = collide(...)                      only when the scene has collision pairs
 rows     = anchor | rheology | limits | contacts   (rheology only for joints that have it)
-lam      = solve(rows, v_free, warm start)   direct when equality-only, else PGS
+lam      = solve(rows, v_free, warm start)   auto: direct when every row is two-sided,
+                                             else hybrid (joints exact, bounded rows by
+                                             PGS on their Schur complement); or PGS
+n        = substeps(forces, inertia)         equal substeps when the joints' geometric
+                                             stiffness needs them (solver.substep)
 v, pose  = integrate(...)
 q_sf     = rheology_update(rows, v)          with the SOLVED velocity w_s[t+1]
 """
@@ -20,6 +24,7 @@ from solver.contact_rows import contact_rows
 from solver.direct import direct_solve
 from solver.errors import SimulationError
 from solver.grip import coupling_rows, coupling_wrench
+from solver.hybrid import hybrid_solve
 from solver.integrate import free_velocity, integrate_pose
 from solver.joints import (
     anchor_rows,
@@ -38,6 +43,7 @@ from solver.response import dense_system, regularize, row_response, world_invers
 from solver.rows import KEY_SHIFT, KIND_CONTACT, KIND_FRICTION, KIND_RHEOLOGY, Rows, concat
 from solver.stabilize import project_joints
 from solver.state import State, StepInput, StepReport
+from solver.substep import run_substeps, substeps_needed
 from solver.touch import POINTER_KEY_OFFSET, pointer_contacts
 
 
@@ -105,7 +111,7 @@ def solve(model: Model, state: State, rows: Rows, resp: tuple, vel_free: np.ndar
     opt = model.options
     method = opt.method
     if method == "auto":
-        method = "direct" if rows.bilateral else "pgs"
+        method = "direct" if rows.bilateral else "hybrid"
     lam0 = warm_start(model, state, rows)
     if method == "direct":
         if not rows.bilateral:
@@ -116,6 +122,9 @@ def solve(model: Model, state: State, rows: Rows, resp: tuple, vel_free: np.ndar
         if ok:
             return lam, _apply(rows, resp, vel_free, lam), 1, residual, "direct"
         lam0 = lam  # the active set did not settle: finish with PGS from there
+    if method == "hybrid":
+        lam, sweeps, residual = hybrid_solve(rows, resp, vel_free, lam0, opt.iterations)
+        return lam, _apply(rows, resp, vel_free, lam), sweeps, residual, "hybrid"
     if method == "reference":
         q, c = dense_system(rows, resp, vel_free)
         lam = reference_solve(q, c, rows.lo, rows.hi, rows.fric_of, rows.mu)
@@ -136,10 +145,25 @@ def _apply(rows: Rows, resp: tuple, vel_free: np.ndarray, lam: np.ndarray) -> np
 
 
 def step(model: Model, state: State, inp: StepInput | None = None) -> tuple[State, StepReport]:
-    """Advance one step of size model.options.h."""
+    """Advance one step of size model.options.h (in equal substeps when the joints'
+    geometric stiffness needs them: solver.substep)."""
     inp = inp or StepInput()
-    h = model.options.h
     body_rot = quat.matrix(state.body_quat)
+    n = substeps_needed(
+        model.options.h, model.options.max_substeps, model.joint_parent, model.joint_bone,
+        model.joint_anchor_parent, model.joint_anchor_child, model.body_inv_mass,
+        body_rot @ model.body_inertia @ np.swapaxes(body_rot, 1, 2), body_rot,
+        state.warm_key, state.warm_lam,
+    )  # fmt: skip
+    if n > 1:
+        return run_substeps(model, state, inp, n, step)
+    return _step_once(model, state, inp, body_rot)
+
+
+def _step_once(
+    model: Model, state: State, inp: StepInput, body_rot: np.ndarray
+) -> tuple[State, StepReport]:
+    h = model.options.h
     inv_i = world_inverse_inertia(model.body_inv_inertia, body_rot)
     vel_free = free_velocity(model, state, inp, inv_i)
     rows, ncontact, rheo_joint = build_rows(model, state, body_rot, vel_free, inp)

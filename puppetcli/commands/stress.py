@@ -11,6 +11,7 @@ from pathlib import Path
 import click
 
 from puppetcli.outputs import write_text_atomic
+from puppetcli.rigfile import SOLVER_METHODS
 from puppetcli.stress import CASES, RANDOM, RANDOM_SEEDS, CaseResult, run_cases
 
 
@@ -28,6 +29,12 @@ from puppetcli.stress import CASES, RANDOM, RANDOM_SEEDS, CaseResult, run_cases
     help=f"Run only the random rig of this seed (default: seeds 0–{RANDOM_SEEDS - 1}).",
 )
 @click.option(
+    "--solver",
+    "method",
+    type=click.Choice(SOLVER_METHODS),
+    help="Solve every case with this solver method (default: each case's own, auto).",
+)
+@click.option(
     "--csv",
     "csv_path",
     type=click.Path(dir_okay=False, path_type=Path),
@@ -35,7 +42,11 @@ from puppetcli.stress import CASES, RANDOM, RANDOM_SEEDS, CaseResult, run_cases
 )
 @click.pass_context
 def command(
-    ctx: click.Context, names: tuple[str, ...], seed: int | None, csv_path: Path | None
+    ctx: click.Context,
+    names: tuple[str, ...],
+    seed: int | None,
+    method: str | None,
+    csv_path: Path | None,
 ) -> None:
     """Simulate extreme rigs and inputs and check that each stays stable.
 
@@ -54,7 +65,7 @@ def command(
     seeds = [seed] if seed is not None else list(range(RANDOM_SEEDS))
     runs = sum(n != RANDOM for n in chosen) + (len(seeds) if RANDOM in chosen else 0)
     with _progress(runs) as tick:
-        results = run_cases(chosen, seeds, tick)
+        results = run_cases(chosen, seeds, tick, method)
     click.echo(format_table(results))
     if csv_path is not None:
         write_text_atomic(csv_path, csv_text(results))

@@ -31,15 +31,16 @@ from solver.fast.cache import ensure_fresh_cache
 
 ensure_fresh_cache()
 
-from solver.fast.kernel import MODE_GRIP, MODE_TOUCH, step_kernel  # noqa: E402
+from solver.fast.kernel import MODE_GRIP, MODE_TOUCH, SUBSTEP, step_kernel  # noqa: E402
 from solver.fast.pack import FastModel, fast_model  # noqa: E402
 from solver.model import Model  # noqa: E402
 from solver.state import State, StepInput, StepReport  # noqa: E402
 from solver.step import step  # noqa: E402
+from solver.substep import run_substeps  # noqa: E402
 
 __all__ = ["fast_model", "fast_step", "supports"]
 
-SOLVER_NAMES = ("direct", "pgs")
+SOLVER_NAMES = ("direct", "pgs", "hybrid")
 _F8, _I8, _B1 = np.dtype(np.float64), np.dtype(np.int64), np.dtype(np.bool_)
 _NO_VEC = np.zeros(16)  # the pointer / coupling argument when there is none (never read)
 
@@ -151,6 +152,8 @@ def fast_step(model: Model, state: State, inp: StepInput | None = None) -> tuple
     status, out, warm_key, warm_lam, rep_i, rep_f = _ENTRY[0](
         fm.m, fm.g, fm.tree, fm.ptree, fm.ws, fm.pws, fm.opt, fm.iopt, st, ins
     )
+    if status == SUBSTEP:
+        return run_substeps(model, state, inp, int(rep_i[0]), fast_step)
     if status:
         return step(model, state, inp)
     fields = dict(

@@ -17,6 +17,8 @@ import numpy as np
 
 from solver import quat
 from solver.fast import fast_step
+from solver.fast.clock import seconds_per_cycle
+from solver.fast.kernel import STAGES
 from solver.fast.pack import fast_model
 from solver.fast.rows import row_arrays
 from solver.fast.tree import dense_solve, node_rows, tree_solve
@@ -165,4 +167,25 @@ def direct_solvers(model: Model, calls: int = 2000) -> dict[str, float]:
         for _ in range(calls):
             fn()
         out[name] = (time.perf_counter() - start) / calls * 1e6
+    return out
+
+
+def stage_profile(model: Model, state: State, inputs: list[StepInput]) -> dict[str, float]:
+    """Microseconds per step of each stage of the compiled step (solver.fast.kernel.STAGES,
+    read from the processor's cycle counter inside the step) over ``inputs``, plus the
+    rest of the wall time per step: argument passing and fast_step's own Python (and the
+    substeps of a subdivided step, which run on their own model)."""
+    fm = fast_model(model)
+    prof = fm.ws[10]
+    fast_step(model, state, inputs[0])  # compiled and cached before the count starts
+    per_cycle = seconds_per_cycle()
+    prof[:] = 0
+    fm.iopt[7] = 1
+    try:
+        wall, _ = _run(fast_step, model, state, inputs)
+    finally:
+        fm.iopt[7] = 0
+    n = len(inputs)
+    out = {name: float(c) * per_cycle / n * 1e6 for name, c in zip(STAGES, prof, strict=True)}
+    out["call and Python (fast_step)"] = wall / n * 1e6 - sum(out.values())
     return out

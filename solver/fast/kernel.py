@@ -11,8 +11,9 @@
 
 Packed arguments (see ``solver.fast.pack``): m model arrays, g geometry, tree the
 elimination forest, ws/pws workspaces, opt/iopt options, st state arrays, inp input.
-Status ≠ 0 hands the step back to the numpy implementation (box–box contact, a
-monitor failure that must raise, a degenerate direct system).
+Status FALLBACK hands the step back to the numpy implementation (box–box contact, a
+monitor failure that must raise, a degenerate direct system); SUBSTEP asks for
+rep_i[0] equal substeps (solver.substep) before anything is computed.
 """
 
 from __future__ import annotations
@@ -23,6 +24,7 @@ import numpy as np
 from numba import njit
 
 from solver.direct import direct_solve
+from solver.fast.clock import cycles
 from solver.fast.contacts import (
     collide_pointer,
     collide_scene,
@@ -31,6 +33,7 @@ from solver.fast.contacts import (
     is_touch_row,
     world_shapes,
 )
+from solver.fast.hybrid import hybrid_solve
 from solver.fast.kin import congruence, matvec, qmatrix, quat_at
 from solver.fast.post import (
     apply,
@@ -44,13 +47,37 @@ from solver.fast.post import (
 from solver.fast.rows import ZERO, anchor_rows, limit_rows, rheology_rows
 from solver.fast.tree import node_rows, row_velocity, tree_solve
 from solver.pgs import pgs_solve
-from solver.rows import KIND_GRIP
+from solver.rows import KIND_GRIP, KIND_RHEOLOGY
+from solver.substep import substeps_needed
 
-OK, FALLBACK = 0, 1
-SOLVER_DIRECT, SOLVER_PGS = 0, 1
-METHOD_AUTO, METHOD_PGS, METHOD_DIRECT = 0, 1, 2
+OK, FALLBACK, SUBSTEP = 0, 1, 2
+SOLVER_DIRECT, SOLVER_PGS, SOLVER_HYBRID = 0, 1, 2
+METHOD_AUTO, METHOD_PGS, METHOD_DIRECT, METHOD_HYBRID = 0, 1, 2, 3
 MODE_NONE, MODE_GRIP, MODE_TOUCH = 0, 1, 2
 DIRECT_ROUNDS = inspect.signature(direct_solve).parameters["rounds"].default
+
+
+STAGES = (
+    "setup (frames, inertia, substep test)",
+    "free velocities",
+    "joint rows (anchors, rheology, limits)",
+    "collision and contact/grip rows",
+    "row response, regularisation",
+    "solve",
+    "integrate, project, monitor",
+    "rheology update, warm keys, report",
+)
+"""Stages of the step's profile (``ws[10]``: cycles per stage, summed while iopt[7])."""
+
+
+@njit(cache=True, error_model="numpy")
+def tick(prof, on, stage, t0):
+    """Add the cycles since t0 to ``stage`` when profiling; the new mark."""
+    if not on:
+        return t0
+    t = cycles()
+    prof[stage] += t - t0
+    return t
 
 
 @njit(cache=True, error_model="numpy")
@@ -77,11 +104,14 @@ def build_rows(m, g, opt, iopt, st, rot, vel_free, inp, ws):
     rw, rheo_joint, cb, centre, srot = ws[0], ws[3], ws[4], ws[8], ws[9]
     pvec, cvec, ivec = inp[2], inp[3], inp[4]
     h = opt[0]
+    prof, on = ws[10], iopt[7]
+    t = cycles() if on else 0
     n = anchor_rows(m, pos, rot, st[3], h, opt[1], True, rw, 0)
     if iopt[3]:
         n = rheology_rows(m, quat, rot, h, st[4], st[5], st[6], rheo_joint, rw, n)
     if iopt[4]:
         n = limit_rows(m, quat, rot, h, opt[1], opt[5], rw, n)
+    tick(prof, on, 2, t)
     ncontact = 0
     if iopt[5] or ivec[0] == MODE_TOUCH:
         world_shapes(g, pos, quat, centre, srot)
@@ -232,6 +262,16 @@ def solve(m, tree, ws, opt, iopt, st, n, vel_free, grip):
         if code == 0:
             return OK, lam, vel, 1, residual, SOLVER_DIRECT
         lam0 = lam
+    if method == METHOD_HYBRID or (method == METHOD_AUTO and not bilateral):
+        ne = 0
+        while ne < n and rw[11][ne] <= KIND_RHEOLOGY:
+            ne += 1
+        ok, lam, vel, sweeps, residual = hybrid_solve(
+            m, tree, ws, opt, rw, n, ne, vel_free, lam0, iopt[1]
+        )
+        if not ok:
+            return FALLBACK, lam, vel, 0, 0.0, SOLVER_HYBRID
+        return OK, lam, vel, sweeps, residual, SOLVER_HYBRID
     lam, vel, sweeps, residual = pgs_solve(
         rw[0][:n],
         rw[1][:n],
@@ -285,19 +325,33 @@ def step_kernel(m, g, tree, ptree, ws, pws, opt, iopt, st, inp):
     )
     rep_i, rep_f = np.zeros(4, dtype=np.int64), np.zeros(10)
     none_k, none_l = np.empty(0, dtype=np.int64), np.empty(0)
+    prof, on = ws[10], iopt[7]
+    t = cycles() if on else 0
     for b in range(nb):
         qmatrix(quat_at(quat, b), rot, b)
         congruence(rot, b, m[18], b, inv_i, b)
         congruence(rot, b, m[17], b, inertia_w, b)
+    nsub = substeps_needed(
+        opt[0], iopt[6], m[0], m[1], m[2], m[3], m[16], inertia_w, rot, st[8], st[9]
+    )
+    if nsub > 1:
+        rep_i[0] = nsub
+        return SUBSTEP, out, none_k, none_l, rep_i, rep_f
+    t = tick(prof, on, 0, t)
     vel_free = np.empty((nb, 6))
     free_velocity(m, opt, st, inv_i, inp, vel_free)
+    t = tick(prof, on, 1, t)
+    joint_part = prof[2]
     n, ncontact, grip0, ngrip = build_rows(m, g, opt, iopt, st, rot, vel_free, inp, ws)
     if n < 0:
         return FALLBACK, out, none_k, none_l, rep_i, rep_f
+    t = tick(prof, on, 3, t + (prof[2] - joint_part))  # build_rows timed its joint rows (2)
     response(rw, n, m[16], inv_i, opt[0], ws[1], ws[2])
     regularize(rw, n, ws[1], ws[2], opt[6])
+    t = tick(prof, on, 4, t)
     grip = (grip0, ngrip, inp[4][1])
     status, lam, vel, iters, residual, used = solve(m, tree, ws, opt, iopt, st, n, vel_free, grip)
+    t = tick(prof, on, 5, t)
     if status or not state_ok(m, opt, pos, quat, vel[:, :3], vel[:, 3:]):
         return FALLBACK, out, none_k, none_l, rep_i, rep_f
     integrate(m, opt[0], pos, quat, vel, rot, out[0], out[1], out[3])
@@ -306,10 +360,12 @@ def step_kernel(m, g, tree, ptree, ws, pws, opt, iopt, st, inp):
     if not state_ok(m, opt, out[0], out[1], vel[:, :3], out[3]):
         return FALLBACK, out, none_k, none_l, rep_i, rep_f
     out[2][:, :] = vel[:, :3]
+    t = tick(prof, on, 6, t)
     rheology_update(m, opt, st, rw, n, lam, vel, ws[3], out[1], out[4:])
     keys = rw[10][:n]
     order = np.argsort(keys, kind="mergesort")
     rep_i[0], rep_i[1], rep_i[2], rep_i[3] = n, ncontact, iters, used
     rep_f[0] = residual
     report(rw, n, lam, rep_f)
+    tick(prof, on, 7, t)
     return OK, out, keys[order], lam[order], rep_i, rep_f

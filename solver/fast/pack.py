@@ -18,12 +18,12 @@ Tuple layouts:
   tree 0 static elimination order 1 node parent 2 first rheology row per joint
        3 no-rheology marker 4 sequence buffer 5 node rows 6 node sizes 7 (D, Y, w, g)
   ws   0 rows 1 resp_a 2 resp_b 3 joint of each rheology row 4 contacts 5 rot 6 I_w⁻¹
-       7 I_w 8 shape centres 9 shape rotations
+       7 I_w 8 shape centres 9 shape rotations 10 cycles per stage (solver.fast.kernel)
   opt  h, joint_erp, contact_erp, contact_slop, contact_margin, limit_margin,
        regularization, yield_filter_time, max_speed, max_angular_speed, max_joint_gap,
        warm_start_factor, gravity (3)
-  iopt method (0 auto, 1 pgs, 2 direct), iterations, warm_start, has rheology,
-       has limits, has collision
+  iopt method (0 auto, 1 pgs, 2 direct, 3 hybrid), iterations, warm_start, has rheology,
+       has limits, has collision, max substeps, profiling on
 """
 
 from __future__ import annotations
@@ -34,9 +34,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from solver.fast.kernel import STAGES
 from solver.model import Model
 
-METHODS = {"auto": 0, "pgs": 1, "direct": 2}
+METHODS = {"auto": 0, "pgs": 1, "direct": 2, "hybrid": 3}
 FEATURES = (2, 8, 3, 3, 16)  # most contacts per pair of each group
 BOX_BOX = 4
 _GROUP = {(0, 1): 0, (0, 2): 1, (1, 1): 2, (1, 2): 3, (2, 2): BOX_BOX}
@@ -131,6 +132,8 @@ def pack(model: Model) -> FastModel:
             bool(model.joint_rheology.any()),
             model.has_limits,
             model.has_collision,
+            o.max_substeps,
+            0,
         ],
         np.int64,
     )
@@ -149,6 +152,7 @@ def pack(model: Model) -> FastModel:
         np.zeros((nb, 3, 3)),
         np.zeros((ns, 3)),
         np.zeros((ns, 3, 3)),
+        np.zeros(len(STAGES), np.int64),
     )
     pws = (
         _rows(3 * nj),

@@ -80,6 +80,46 @@ def chol_solve(lo, m, b):
 
 
 @njit(cache=True, error_model="numpy")
+def _chol_block(dm, i, m, sign):
+    """dm[i, :m, :m] ← lower Cholesky factor of sign·dm[i] (lower triangle read), indexed
+    in place (no array views: they cost reference counting in the hot loop)."""
+    for j in range(m):
+        d = sign * dm[i, j, j]
+        for k in range(j):
+            d -= dm[i, j, k] * dm[i, j, k]
+        if not d > 0.0:
+            return False
+        d = math.sqrt(d)
+        dm[i, j, j] = d
+        for r in range(j + 1, m):
+            s = sign * dm[i, r, j]
+            for k in range(j):
+                s -= dm[i, r, k] * dm[i, j, k]
+            dm[i, r, j] = s / d
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def _forward_block(dm, i, m, x):
+    """x[i, :m] ← L_i⁻¹ x[i, :m]."""
+    for r in range(m):
+        s = x[i, r]
+        for k in range(r):
+            s -= dm[i, r, k] * x[i, k]
+        x[i, r] = s / dm[i, r, r]
+
+
+@njit(cache=True, error_model="numpy")
+def _backward_block(dm, i, m, x):
+    """x[i, :m] ← L_i⁻ᵀ x[i, :m]."""
+    for r in range(m - 1, -1, -1):
+        s = x[i, r]
+        for k in range(r + 1, m):
+            s -= dm[i, k, r] * x[i, k]
+        x[i, r] = s / dm[i, r, r]
+
+
+@njit(cache=True, error_model="numpy")
 def row_velocity(rw, r, vel):
     """J_r v (static sides skipped)."""
     a, b = rw[0][r], rw[1][r]
@@ -110,12 +150,13 @@ def node_rows(i, nb, rheo_start, out):
 
 
 @njit(cache=True, error_model="numpy")
-def _init_nodes(seq, nseq, nb, rw, vel_free, h, mass, inertia_w, rows, size, dm, z):
+def init_nodes(seq, nseq, nb, rw, vel_free, h, mass, inertia_w, rows, size, dm, z):
     """D_i and right-hand sides z_i before elimination."""
     for q in range(nseq):
         i = seq[q]
-        dm[i, :, :] = 0.0
-        z[i, :] = 0.0
+        for r in range(6):
+            for c in range(6):
+                dm[i, r, c] = 0.0
         if i < nb:
             size[i] = 6
             for k in range(3):
@@ -124,9 +165,21 @@ def _init_nodes(seq, nseq, nb, rw, vel_free, h, mass, inertia_w, rows, size, dm,
                     dm[i, 3 + k, 3 + c] = inertia_w[i, k, c] / h
             continue
         for k in range(size[i]):
-            r = rows[i, k]
-            dm[i, k, k] = -rw[6][r]
-            z[i, k] = row_velocity(rw, r, vel_free) + rw[7][r]
+            dm[i, k, k] = -rw[6][rows[i, k]]
+    init_rhs(seq, nseq, nb, rw, vel_free, rows, size, z)
+
+
+@njit(cache=True, error_model="numpy")
+def init_rhs(seq, nseq, nb, rw, vel_free, rows, size, z):
+    """z_i: 0 for bodies, J v_free + β for row nodes."""
+    for q in range(nseq):
+        i = seq[q]
+        for k in range(6):
+            z[i, k] = 0.0
+        if i >= nb:
+            for k in range(size[i]):
+                r = rows[i, k]
+                z[i, k] = row_velocity(rw, r, vel_free) + rw[7][r]
 
 
 @njit(cache=True, error_model="numpy")
@@ -137,18 +190,19 @@ def _coupling(i, p, nb, rw, rows, size, g):
     body = p if body_is_p else i
     for k in range(size[row_node]):
         r = rows[row_node, k]
-        jac = rw[2] if rw[0][r] == body else rw[3]
+        on_a = rw[0][r] == body
         for c in range(6):
+            v = -rw[2][r, c] if on_a else -rw[3][r, c]
             if body_is_p:
-                g[k, c] = -jac[r, c]
+                g[k, c] = v
             else:
-                g[c, k] = -jac[r, c]
+                g[c, k] = v
 
 
 @njit(cache=True, error_model="numpy")
-def _eliminate(i, p, m, mp, sign, dm, y, w, g):
-    """With D_i = sign·L Lᵀ: Y = L⁻¹ G, D_p −= sign·YᵀY, z_p −= sign·Yᵀ (L⁻¹ z_i)
-    (lower triangles only: that is what the factorisation reads)."""
+def _eliminate(i, p, m, mp, sign, dm, y, g):
+    """With D_i = sign·L Lᵀ: Y = L⁻¹ G, D_p −= sign·YᵀY (lower triangles only: that is
+    what the factorisation reads)."""
     for c in range(mp):
         for r in range(m):
             s = g[r, c]
@@ -161,10 +215,67 @@ def _eliminate(i, p, m, mp, sign, dm, y, w, g):
             for k in range(m):
                 s += y[i, k, a] * y[i, k, b]
             dm[p, a, b] -= sign * s
-        s = 0.0
+
+
+@njit(cache=True, error_model="numpy")
+def tree_factor(seq, nseq, parent, nb, rw, rows, size, tw):
+    """Factor the forest's system in place, children first (module docstring): each
+    D_i = ±L Lᵀ, Y_i = L⁻¹ K_ip, D_p −= ±Y_iᵀY_i.  False when a block is not definite
+    (degenerate rows: the caller falls back)."""
+    dm, y, g = tw[0], tw[1], tw[3]
+    for q in range(nseq):
+        i = seq[q]
+        m = size[i]
+        sign = 1.0 if i < nb else -1.0
+        if not _chol_block(dm, i, m, sign):
+            return False
+        p = parent[i]
+        if p >= 0:
+            _coupling(i, p, nb, rw, rows, size, g)
+            _eliminate(i, p, m, size[p], sign, dm, y, g)
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def tree_substitute(seq, nseq, parent, nb, size, tw, x, fwd, fwd_tag, bwd, bwd_tag):
+    """x ← K⁻¹ x with the factors of ``tree_factor``; x (nodes, 6): right-hand sides in,
+    solution out (body nodes: velocity change y; row nodes: λ).
+
+    Only nodes with fwd[i] == fwd_tag take part in the forward pass and only nodes with
+    bwd[i] == bwd_tag are solved for (zero arrays and tags solve everything): a node
+    whose subtree has no right-hand side has nothing to pass up, and a node is solved
+    from its parent alone, so a sparse right-hand side needs the forward pass only on
+    the paths from its nodes to their roots, and the solution at some nodes only the
+    backward pass on the paths from the roots down to them (both sets root-closed)."""
+    dm, y = tw[0], tw[1]
+    for q in range(nseq):  # L⁻¹ z_i, children first, folded into the parent
+        i = seq[q]
+        if fwd[i] != fwd_tag:
+            continue
+        m = size[i]
+        _forward_block(dm, i, m, x)
+        p = parent[i]
+        if p >= 0:
+            sign = 1.0 if i < nb else -1.0
+            for a in range(size[p]):
+                s = 0.0
+                for k in range(m):
+                    s += y[i, k, a] * x[i, k]
+                x[p, a] -= sign * s
+    for q in range(nseq - 1, -1, -1):  # x_i = sign·L⁻ᵀ(L⁻¹ z_i − Y x_p), parents first
+        i = seq[q]
+        if bwd[i] != bwd_tag:
+            continue
+        p = parent[i]
+        m = size[i]
+        if p >= 0:
+            for k in range(m):
+                for c in range(size[p]):
+                    x[i, k] -= y[i, k, c] * x[p, c]
+        _backward_block(dm, i, m, x)
+        sign = 1.0 if i < nb else -1.0
         for k in range(m):
-            s += y[i, k, a] * w[i, k]
-        w[p, a] -= sign * s
+            x[i, k] *= sign
 
 
 @njit(cache=True, error_model="numpy")
@@ -174,33 +285,16 @@ def tree_solve(seq, nseq, parent, nb, rw, vel_free, h, mass, inertia_w, rows, si
     seq[:nseq]: nodes, children before parents; parent: node → parent node or −1;
     rows/size: each row node's rows; tw = (D, Y, w, g) workspaces.  False when a
     block is not definite (degenerate rows: the caller falls back)."""
-    dm, y, w, g = tw
-    _init_nodes(seq, nseq, nb, rw, vel_free, h, mass, inertia_w, rows, size, dm, w)
+    w = tw[2]
+    init_nodes(seq, nseq, nb, rw, vel_free, h, mass, inertia_w, rows, size, tw[0], w)
+    if not tree_factor(seq, nseq, parent, nb, rw, rows, size, tw):
+        return False
+    every = np.zeros(len(parent), np.int64)
+    tree_substitute(seq, nseq, parent, nb, size, tw, w, every, 0, every, 0)
     for q in range(nseq):
         i = seq[q]
-        m = size[i]
-        sign = 1.0 if i < nb else -1.0
-        dm[i, :m, :m] *= sign
-        if not chol(dm[i], m):
-            return False
-        forward(dm[i], m, w[i])  # w_i = L⁻¹ z_i
-        p = parent[i]
-        if p >= 0:
-            _coupling(i, p, nb, rw, rows, size, g)
-            _eliminate(i, p, m, size[p], sign, dm, y, w, g)
-    for q in range(nseq - 1, -1, -1):  # x_i = sign·L⁻ᵀ(L⁻¹ z_i − Y x_p), parents first
-        i = seq[q]
-        p = parent[i]
-        m = size[i]
-        if p >= 0:
-            for k in range(m):
-                for c in range(size[p]):
-                    w[i, k] -= y[i, k, c] * w[p, c]
-        backward(dm[i], m, w[i])
-        sign = 1.0 if i < nb else -1.0
-        for k in range(m):
-            w[i, k] *= sign
-            if i >= nb:
+        if i >= nb:
+            for k in range(size[i]):
                 lam[rows[i, k]] = w[i, k]
     return True
 

@@ -54,11 +54,12 @@ def lockstep(model, state, inputs):
         a, ra = step(model, a, inp)
         b, rb = fast_step(model, b, inp)
         where = f"step {k}"
-        assert (ra.rows, ra.contacts, ra.iterations, ra.solver) == (
+        assert (ra.rows, ra.contacts, ra.iterations, ra.solver, ra.substeps) == (
             rb.rows,
             rb.contacts,
             rb.iterations,
             rb.solver,
+            rb.substeps,
         ), where
         assert (a.time, a.step) == (b.time, b.step), where
         assert np.array_equal(a.joint_yielded, b.joint_yielded), where
@@ -176,14 +177,24 @@ def doll_inputs(model, steps: int) -> tuple:
     return state, inputs
 
 
-def test_doll_with_contacts_push_grip_and_touch_matches():
-    model = build_model(load_rig(DOLL)).with_options(h=0.001)
+@pytest.mark.parametrize("method", ["auto", "pgs"])
+def test_doll_with_contacts_push_grip_and_touch_matches(method):
+    model = build_model(load_rig(DOLL)).with_options(h=0.001, method=method)
     assert supports(model)
     state, inputs = doll_inputs(model, 500)
     reports = lockstep(model, state, inputs)
+    assert {r.solver for r in reports} == {"hybrid" if method == "auto" else "pgs"}
     assert min(r.contacts for r in reports) > 0
     assert max(np.abs(r.grip_force).max() for r in reports[:250]) > 1.0
     assert max(np.abs(r.touch_force).max() for r in reports[250:]) > 1.0
+
+
+def test_substepped_rope_matches():
+    # The light rope at h = 5 ms takes two substeps once its tension builds up; both
+    # implementations choose the same count (the same criterion) and the same states.
+    model = build_model(chain(40, 0.005, link=0.02, radius=0.005, masses=[0.02] * 40))
+    reports = lockstep(model, initial_state(model), [None] * 60)
+    assert {r.substeps for r in reports} >= {1, 2}
 
 
 def test_monitor_failures_raise_the_numpy_steps_error():

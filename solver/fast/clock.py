@@ -1,0 +1,43 @@
+"""A cycle counter readable from compiled code, for the step's stage profile.
+
+``cycles()`` is LLVM's ``readcyclecounter`` (the time-stamp counter on x86-64): an
+intrinsic, so code that calls it still caches on disk (a ctypes clock would pin a
+function address into the cache).  Counts are converted to seconds by timing a known
+interval against ``time.perf_counter`` (``seconds_per_cycle``).  Where the target has
+no counter it reads 0 and the profile shows zeros.
+"""
+
+from __future__ import annotations
+
+import time
+
+from llvmlite import ir
+from numba import njit, types
+from numba.core import cgutils
+from numba.extending import intrinsic
+
+
+@intrinsic
+def _readcyclecounter(typingctx):
+    def codegen(context, builder, signature, args):
+        fnty = ir.FunctionType(ir.IntType(64), [])
+        fn = cgutils.get_or_insert_function(builder.module, fnty, "llvm.readcyclecounter")
+        return builder.call(fn, [])
+
+    return types.int64(), codegen
+
+
+@njit(cache=True)
+def cycles():
+    """The processor's cycle counter (int64)."""
+    return _readcyclecounter()
+
+
+def seconds_per_cycle(interval: float = 0.05) -> float:
+    """Seconds per count of ``cycles`` over a busy-waited interval (0 without a counter)."""
+    cycles()
+    c0, t0 = cycles(), time.perf_counter()
+    while time.perf_counter() - t0 < interval:
+        pass
+    c1, t1 = cycles(), time.perf_counter()
+    return (t1 - t0) / (c1 - c0) if c1 > c0 else 0.0

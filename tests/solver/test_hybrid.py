@@ -1,0 +1,98 @@
+"""The hybrid solver (solver.hybrid): joints exact, bounded rows by PGS on their Schur
+complement; checked against the dense reference (BVLS), the dense LCP conditions, PGS
+on the same table, and the exact joint equations."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from rigbuild import chain, rheology
+from test_solvers import contact_scene, lcp_violation, problem, run_pgs
+
+from solver.hybrid import equality_rows, hybrid_solve
+from solver.model import build_model
+from solver.pgs import dense_pgs
+from solver.reference import reference_solve
+from solver.response import dense_system
+from solver.spec import ShapeSpec
+from solver.state import initial_state
+from solver.step import step
+from solver.stress_cases import free_bodies
+
+
+def velocities(rows, resp, vel_free, lam):
+    vel = np.vstack((vel_free, np.zeros((1, 6))))
+    np.add.at(vel, rows.body_a, resp[0] * lam[:, None])
+    np.add.at(vel, rows.body_b, resp[1] * lam[:, None])
+    return vel[:-1]
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_hybrid_reaches_the_reference_without_friction(seed):
+    # Frictionless: a convex QP with unique velocities; the reference is exact (BVLS).
+    model, state = contact_scene(seed)
+    rows, resp, vel_free, ncontact = problem(model, state)
+    assert ncontact > 0 and equality_rows(rows).any() and not equality_rows(rows).all()
+    rows = replace(rows, mu=np.zeros(len(rows)))
+    q, c = dense_system(rows, resp, vel_free)
+    vel_ref = velocities(rows, resp, vel_free, reference_solve(q, c, rows.lo, rows.hi,
+                                                               rows.fric_of, rows.mu))  # fmt: skip
+    lam, _, _ = hybrid_solve(rows, resp, vel_free, np.zeros(len(rows)), 2000)
+    assert np.abs(velocities(rows, resp, vel_free, lam) - vel_ref).max() < 1e-7
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_hybrid_with_friction_solves_the_lcp(seed):
+    model, state = contact_scene(seed)
+    rows, resp, vel_free, _ = problem(model, state)
+    q, c = dense_system(rows, resp, vel_free)
+    lam, _, residual = hybrid_solve(rows, resp, vel_free, np.zeros(len(rows)), 5000)
+    assert lcp_violation(q, c, lam, rows) < 1e-9
+    assert residual < 1e-9
+
+
+@pytest.mark.parametrize("sweeps", [1, 3, 15])
+def test_joint_rows_hold_exactly_whatever_the_sweeps(sweeps):
+    # The E rows are solved by elimination given λ_U, so r_E = (Qλ + c)_E vanishes to
+    # rounding after any number of sweeps; PGS with as many sweeps leaves them open.
+    model, state = contact_scene(3)
+    rows, resp, vel_free, _ = problem(model, state)
+    q, c = dense_system(rows, resp, vel_free)
+    eq = equality_rows(rows)
+    lam, _, _ = hybrid_solve(rows, resp, vel_free, np.zeros(len(rows)), sweeps)
+    scale = np.abs(c[eq]).max()
+    assert np.abs(q[eq] @ lam + c[eq]).max() < 1e-9 * scale
+    lam_pgs = run_pgs(rows, resp, vel_free, sweeps)[0]
+    assert np.abs(q[eq] @ lam_pgs + c[eq]).max() > 1e-4 * scale
+
+
+def test_without_joints_the_hybrid_is_pgs_on_the_dense_system():
+    # Free balls on the ground: no equality rows, S = Q, and dense_pgs's sweeps are
+    # PGS's sweeps (the same Gauss–Seidel order and projection).
+    ball = ShapeSpec("sphere", radius=0.05)
+    shapes = [(ball, np.array([0.09 * i, 0.03, 0.0]), np.array([0.09 * i, 0.07, 0.0]))
+              for i in range(3)]  # fmt: skip
+    model = free_bodies(shapes, 0.005, gravity=True, ground=True)
+    state = initial_state(model)
+    rows, resp, vel_free, ncontact = problem(model, state)
+    assert ncontact >= 3 and not equality_rows(rows).any()
+    q, c = dense_system(rows, resp, vel_free)
+    for sweeps in (1, 2, 7):
+        lam_dense = dense_pgs(q, c, rows.lo, rows.hi, rows.fric_of, rows.mu,
+                              np.zeros(len(rows)), sweeps, 0.0)[0]  # fmt: skip
+        lam_pgs = run_pgs(rows, resp, vel_free, sweeps)[0]
+        assert np.abs(lam_dense - lam_pgs).max() <= 1e-10 * max(1.0, np.abs(lam_pgs).max())
+
+
+def test_auto_uses_hybrid_with_contacts_and_direct_without():
+    model = build_model(chain(4, 0.005, collide=True, ground=0.97))
+    state = initial_state(model)
+    solvers = set()
+    for _ in range(60):
+        state, report = step(model, state)
+        solvers.add(report.solver)
+    assert solvers == {"direct", "hybrid"}
+    bare = build_model(chain(4, 0.005, rheo=rheology(1.0, 0.1, 5.0)))
+    assert step(bare, initial_state(bare))[1].solver == "direct"

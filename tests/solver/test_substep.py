@@ -1,0 +1,106 @@
+"""Substeps for joints under tension (solver.substep): the criterion against its closed
+form, the substepped step against its parts, and the rope that needs it."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from rigbuild import chain
+
+from puppetcli import stress
+from solver import quat
+from solver.fast import fast_step
+from solver.grip import Pointer
+from solver.model import build_model
+from solver.state import State, StepInput, initial_state
+from solver.step import step
+from solver.substep import SAFE_RATE, pointer_at, run_substeps, substeps_needed
+
+
+def needed(model, state: State) -> int:
+    rot = quat.matrix(state.body_quat)
+    inertia_w = rot @ model.body_inertia @ np.swapaxes(rot, 1, 2)
+    o = model.options
+    return substeps_needed(
+        o.h, o.max_substeps, model.joint_parent, model.joint_bone, model.joint_anchor_parent,
+        model.joint_anchor_child, model.body_inv_mass, inertia_w, rot, state.warm_key,
+        state.warm_lam,
+    )  # fmt: skip
+
+
+def with_anchor_force(model, force: float) -> State:
+    """The rest state with a last-step force of ``force`` N on joint 0's anchor rows."""
+    nj = model.njoint
+    lam = np.zeros(3 * nj)
+    lam[0] = force
+    return replace(initial_state(model), warm_key=np.arange(3 * nj, dtype=np.int64), warm_lam=lam)
+
+
+@pytest.mark.parametrize("target", [1, 2, 4, 9])
+def test_two_free_links_need_the_closed_form_count(target):
+    # Two equal links (L = 0.1 m) joined at their ends, nothing else: each side has the
+    # lever L/2 and k = f·L/2, so ω² = (2k/r²)/(2I⊥/r²) = f·L/(2 I⊥), I⊥ the transverse
+    # moment, and n = ceil(h·ω/SAFE_RATE).  Pick f for h·ω/SAFE_RATE = target − 0.5.
+    model = build_model(chain(2, 0.005, root_mode="free", gravity=(0, 0, 0)))
+    transverse = np.linalg.eigvalsh(model.body_inertia[0])[-1]
+    omega = (target - 0.5) * SAFE_RATE / model.options.h
+    force = omega**2 * 2.0 * transverse / 0.1
+    state = with_anchor_force(model, force)
+    assert needed(model, state) == target
+    assert needed(model.with_options(max_substeps=3), state) == min(target, 3)
+    assert needed(model.with_options(max_substeps=1), state) == 1
+
+
+def test_a_joint_to_the_world_has_no_tension_mode():
+    # One link hanging from a fixed stand by its joint: the anchor cannot move sideways.
+    model = build_model(chain(1, 0.05, root_mode="ball"))
+    assert needed(model, with_anchor_force(model, 1e6)) == 1
+
+
+def test_pointer_moves_back_along_its_mean_velocity():
+    rotvec = np.array([0.0, 0.0, 2.0])
+    ptr = Pointer(np.array([1.0, 2.0, 3.0]), quat.exp(rotvec * 0.01), np.array([0.5, 0.0, -1.0]),
+                  rotvec, 0.01)  # fmt: skip
+    back = pointer_at(ptr, 0.004)
+    assert np.allclose(back.pos, [0.998, 2.0, 3.004], atol=1e-15)
+    assert np.allclose(back.quat, quat.exp(rotvec * 0.006), atol=1e-15)
+    assert (back.vel is ptr.vel) and back.radius == ptr.radius
+
+
+def test_a_substepped_step_is_its_substeps():
+    # A falling chain with a push: run_substeps(n) = n steps of h/n of the same input,
+    # counted as one step; iterations add up.
+    model = build_model(chain(3, 0.01))
+    force = np.zeros((3, 3))
+    force[2] = [0.0, 5.0, 0.0]
+    inp = StepInput(body_force=force)
+    state = initial_state(model)
+    whole, report = run_substeps(model, state, inp, 4, step)
+    sub = model.with_options(h=0.0025, max_substeps=1)
+    parts = state
+    iterations = 0
+    for _ in range(4):
+        parts, r = step(sub, parts, inp)
+        iterations += r.iterations
+    assert np.array_equal(whole.body_pos, parts.body_pos)
+    assert (whole.step, whole.time) == (1, pytest.approx(0.01, abs=1e-18))
+    assert report.substeps == 4 and report.iterations == iterations
+
+
+def test_the_rope_needs_substeps_and_is_stable_with_them():
+    # The 100-link rope of 2 cm, 20 g links at h = 5 ms: beyond the tension limit
+    # h ≈ 0.85·sqrt(m·L/T) (docs/stress.md) without substeps.
+    scene = stress.chain_100_rope()
+    one = replace(scene, model=scene.model.with_options(max_substeps=1))
+    assert not stress.run_scene(one).stable
+    res = stress.run_scene(scene)
+    assert res.stable, res.problems
+    model, state, counts = scene.model, scene.start, []
+    for _ in range(round(scene.duration / model.options.h)):
+        state, report = fast_step(model, state)
+        counts.append(report.substeps)
+    assert max(counts) >= 2 and counts[0] == 1
+    assert math.isclose(state.time, scene.duration, rel_tol=1e-12)
