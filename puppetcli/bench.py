@@ -1,23 +1,33 @@
-"""Benchmarks: steps per second of the solvers on example scenes, in one run.
+"""Benchmarks: steps per second of the solvers on the doll, in one run.
 
-Speed is reported as a ratio against a baseline measured in the same run (the
-paper's setting: PGS, 15 iterations, warm start, on the numpy step), never as an
-absolute pass/fail.  Each solver runs on both engines: `numpy` (solver.step.step,
-the readable reference implementation) and `fast` (solver.fast.fast_step, the
-compiled step the CLI uses).
-Each configuration first takes a few untimed steps (JIT compilation, caches),
-then is timed over a fixed simulated duration.
+Speed is reported as ratios measured in the same run, never as an absolute pass/fail:
+against the paper's setting on the numpy step (PGS, 15 iterations, warm start; the
+readable reference implementation, ``solver.step.step``) and, with ``--peers``, against
+MuJoCo on the same rig and scene (``puppetcli.peers.doll_speed``).  Every solver runs
+on the compiled step (``solver.fast.fast_step``, what the CLI uses); the numpy step is
+measured only for the baseline unless asked, since it is ~40× slower and its other
+solvers say nothing about the CLI.
+
+The scene (``time_run``): the doll standing on its stand, its left forearm's end
+gripped (position only, ``GRIP``) and lifted by ``LIFT`` along a minimum-jerk path over
+``seconds``.  Each configuration first takes a few untimed steps (JIT compilation,
+caches), then is timed from rest ``repeats`` times; the best run counts (other
+processes only ever slow a run down).  Repeats are chosen so that every configuration
+times enough steps to be steady (``MIN_TIMED_STEPS``), as MuJoCo's runs are.
 """
 
 from __future__ import annotations
 
+import csv
+import io
+import math
 import time
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
 
-from puppetcli.pointer import Motion, pointer_over_step
+from puppetcli.pointer import Motion, pointer_over_step, still
 from puppetcli.rigfile import load_rig
 from solver import quat
 from solver.errors import SimulationError
@@ -29,23 +39,48 @@ from solver.step import step
 
 RIGS = Path(__file__).resolve().parent.parent / "rigs"
 WARMUP_STEPS = 5
-BASELINE = "pgs"
+BASELINE = "pgs"  # on the numpy step
+SOLVERS = ("pgs", "hybrid", "auto", "direct")
+MIN_TIMED_STEPS = {"fast": 1500, "numpy": 100, "mujoco": 1500}
+MIN_REPEATS = {"fast": 3, "numpy": 1, "mujoco": 3}
+MUJOCO_INTEGRATORS = ("Euler", "implicitfast")
+NAN = math.nan
+INSTALL_HINT = "peers: mujoco is not installed (pip install '.[bench]' to compare with MuJoCo)"
 
 
 @dataclass(frozen=True)
 class BenchRow:
-    """One measured configuration."""
+    """One measured configuration.
+
+    steps: per timed run; seconds: wall time of the best run; realtime: simulated
+    seconds per wall second; ratio: steps/s ÷ numpy PGS's at the same scene and h;
+    vs_mujoco: steps/s ÷ MuJoCo (Euler)'s at the same scene and h (nan: not measured);
+    contacts, substeps: means per step."""
 
     scene: str
     h: float
     solver: str
     engine: str
     steps: int
+    repeats: int
     seconds: float
     steps_per_s: float
+    realtime: float
     ratio: float
-    contacts: float
+    vs_mujoco: float = NAN
+    contacts: float = 0.0
+    substeps: float = 1.0
     note: str = ""
+
+
+@dataclass(frozen=True)
+class Timing:
+    """One timed scene: steps per run, wall seconds of the best run, means per step."""
+
+    steps: int
+    seconds: float
+    contacts: float
+    substeps: float
 
 
 def doll_scenes() -> dict[str, Model]:
@@ -64,90 +99,196 @@ GRIP = dict(  # the script's default gains, position-only (as for pulls)
     force_limit=300.0, torque_limit=30.0, position_only=True,
 )  # fmt: skip
 LIFT = np.array([0.0, 0.15, 0.15])  # m: where the grip takes the forearm's end
-
+GRIP_BONE = "forearm_l"
 
 ENGINES = {"numpy": step, "fast": fast_step}
 
 
-def time_run(model: Model, seconds: float, engine: str = "numpy") -> tuple[int, float, float]:
-    """(steps, wall seconds, mean contacts): the doll standing on the ground while a grip
-    lifts its left forearm's end along a minimum-jerk path over ``seconds``."""
+def grip_inputs(model: Model, lift: float, steps: int) -> list[StepInput]:
+    """The inputs of ``steps`` steps at the model's h: the grip on GRIP_BONE's tail whose
+    pointer lifts by LIFT over ``lift`` s (minimum jerk), then stays still.
+
+    The grip is made with the pointer where the motion starts, so its rest is the
+    pointer-to-bone pose at t = 0 (nothing jumps), as a script's grip.  The pointer's
+    path depends on time only, so the inputs are made before any clock starts and a
+    timing is the step's (a script run adds ~80 µs of Python per step; see README)."""
+    state = initial_state(model)
+    b = model.bone_names.index(GRIP_BONE)
+    end = model.bone_tail0[b]
+    h = model.options.h
+    at_rest = pointer_over_step(still(end, quat.IDENTITY), 0.0, h, 0.0)
+    coupling = make_coupling(state, at_rest, b, end, **GRIP)
+    motion = Motion(0.0, lift, end, quat.IDENTITY, LIFT, np.zeros(3))
+    return [
+        StepInput(pointer=pointer_over_step(motion, k * h, h, 0.0), coupling=coupling)
+        for k in range(steps)
+    ]
+
+
+def repeats_for(steps: int, engine: str) -> int:
+    """How many timed runs of ``steps`` steps make a steady timing on ``engine``."""
+    return max(MIN_REPEATS[engine], math.ceil(MIN_TIMED_STEPS[engine] / max(steps, 1)))
+
+
+def time_run(model: Model, seconds: float, engine: str = "fast", repeats: int = 1) -> Timing:
+    """The grip scene (``grip_inputs``, lift over ``seconds``) from rest, best of
+    ``repeats`` timed runs after WARMUP_STEPS untimed steps."""
     step_fn = ENGINES[engine]
     state = initial_state(model)
     for _ in range(WARMUP_STEPS):
         state, _ = step_fn(model, state)
-    state = initial_state(model)
-    b = model.bone_names.index("forearm_l")
-    end = model.bone_tail0[b]
-    motion = Motion(0.0, seconds, end, quat.IDENTITY, LIFT, np.zeros(3))
-    coupling = make_coupling(state, pointer_over_step(motion, 0.0, 1.0, 0.0), b, end, **GRIP)
-    h = model.options.h
-    n = max(1, round(seconds / h))
-    # The pointer's path depends on time only: made before the clock starts, so the
-    # timing is the step's (the runner's own per-step Python adds ~80 µs; see README).
-    inputs = [
-        StepInput(pointer=pointer_over_step(motion, k * h, h, 0.0), coupling=coupling)
-        for k in range(n)
-    ]
-    contacts = 0
-    start = time.perf_counter()
-    for inp in inputs:
-        state, report = step_fn(model, state, inp)
-        contacts += report.contacts
-    return n, time.perf_counter() - start, contacts / n
+    n = max(1, round(seconds / model.options.h))
+    inputs = grip_inputs(model, seconds, n)
+    best = math.inf
+    for _ in range(repeats):
+        state, contacts, substeps = initial_state(model), 0, 0
+        start = time.perf_counter()
+        for inp in inputs:
+            state, report = step_fn(model, state, inp)
+            contacts += report.contacts
+            substeps += report.substeps
+        best = min(best, time.perf_counter() - start)
+    return Timing(n, best, contacts / n, substeps / n)
 
 
 def measure(
-    scenes: dict[str, Model], steps_h: list[float], solvers: list[str], seconds: float
+    scenes: dict[str, Model],
+    steps_h: list[float],
+    solvers: list[str],
+    seconds: float,
+    engines: tuple[str, ...] = ("fast",),
+    peers: bool = False,
 ) -> list[BenchRow]:
-    """Every (scene, h, solver, engine), with the ratio to numpy PGS at the same scene and h."""
+    """The numpy PGS baseline, then every (solver, engine), at every (scene, h); with
+    ``peers``, MuJoCo's rows on the doll (see ``mujoco_rows``)."""
     rows = []
     for name, model in scenes.items():
         for h in steps_h:
-            base = None
-            for solver in [BASELINE] + [s for s in solvers if s != BASELINE]:
-                for engine in ENGINES:
-                    row = _measure_one(name, model, h, solver, engine, seconds, base)
-                    base = row.steps_per_s if base is None else base
-                    rows.append(row)
+            base = _measure_one(name, model, h, BASELINE, "numpy", seconds, None)
+            here = [base]
+            for solver in solvers:
+                for engine in engines:
+                    if (solver, engine) != (BASELINE, "numpy"):
+                        here.append(_measure_one(name, model, h, solver, engine, seconds, base))
+            if peers and name == "doll":
+                here += mujoco_rows(h, seconds, base)
+            rows += _against_mujoco(here)
     return rows
+
+
+def _failed(name: str, h: float, solver: str, engine: str, note: str) -> BenchRow:
+    return BenchRow(name, h, solver, engine, 0, 0, NAN, NAN, NAN, NAN, NAN, NAN, NAN, note)
 
 
 def _measure_one(
     name: str, model: Model, h: float, solver: str, engine: str, seconds: float, base
 ) -> BenchRow:
     if solver == "direct" and (model.has_collision or model.has_limits):
-        return BenchRow(name, h, solver, engine, 0, 0.0, 0.0, 0.0, 0.0, "n/a: contacts/limits")
+        return _failed(name, h, solver, engine, "n/a: direct needs two-sided rows only")
     if engine == "fast" and solver == "reference":
-        return BenchRow(name, h, solver, engine, 0, 0.0, 0.0, 0.0, 0.0, "n/a: numpy only")
+        return _failed(name, h, solver, engine, "n/a: numpy only")
     m = model.with_options(h=h, method=solver, iterations=15, warm_start=True)
     span = seconds if solver != "reference" else min(seconds, 20 * h)
+    repeats = repeats_for(max(1, round(span / h)), engine)
     try:
-        n, wall, contacts = time_run(m, span, engine)
+        t = time_run(m, span, engine, repeats)
     except SimulationError as exc:
-        return BenchRow(name, h, solver, engine, 0, 0.0, 0.0, 0.0, 0.0, str(exc)[:60])
-    rate = n / wall
-    return BenchRow(name, h, solver, engine, n, wall, rate, rate / (base or rate), contacts)
+        return _failed(name, h, solver, engine, f"failed: {str(exc)[:60]}")
+    rate = t.steps / t.seconds
+    ratio = rate / base.steps_per_s if base is not None else 1.0
+    return BenchRow(name, h, solver, engine, t.steps, repeats, t.seconds, rate,
+                    t.steps * h / t.seconds, ratio, contacts=t.contacts,
+                    substeps=t.substeps)  # fmt: skip
+
+
+def mujoco_rows(h: float, seconds: float, base: BenchRow) -> list[BenchRow]:
+    """MuJoCo on the same doll scene (``puppetcli.peers.doll_speed``), one row per
+    integrator in MUJOCO_INTEGRATORS; engine "mujoco"."""
+    from puppetcli import peers
+
+    rows = []
+    n = max(1, round(seconds / h))
+    for integrator in MUJOCO_INTEGRATORS:
+        if n < peers.WARMUP_STEPS:  # doll_speed warms up on the run's own inputs
+            note = f"n/a: MuJoCo's run needs ≥ {peers.WARMUP_STEPS} steps"
+            rows.append(_failed("doll", h, integrator.lower(), "mujoco", note))
+            continue
+        r = peers.doll_speed(h, seconds, integrator, repeats=repeats_for(n, "mujoco"))
+        rate = r["steps_per_s"]
+        rows.append(BenchRow("doll", h, integrator.lower(), "mujoco", r["steps"],
+                             repeats_for(n, "mujoco"), r["seconds"], rate,
+                             r["steps"] * h / r["seconds"], rate / base.steps_per_s,
+                             contacts=r["contacts"],
+                             note="diverged" if r["diverged"] else ""))  # fmt: skip
+    return rows
+
+
+def _against_mujoco(rows: list[BenchRow]) -> list[BenchRow]:
+    """Fill vs_mujoco (÷ MuJoCo Euler at the same scene and h) when it was measured."""
+    ref = [r for r in rows if r.engine == "mujoco" and r.solver == "euler" and not r.note]
+    if not ref:
+        return rows
+    return [replace(r, vs_mujoco=r.steps_per_s / ref[0].steps_per_s) for r in rows]
 
 
 def format_table(rows: list[BenchRow]) -> str:
-    """A fixed-width table of the rows."""
+    """A fixed-width table of the rows (nan shown as -)."""
     head = (
-        f"{'scene':<12} {'h (s)':>7} {'solver':<10} {'engine':<6} {'steps':>6} {'steps/s':>10} "
-        f"{'× numpy pgs':>11} {'contacts':>8}  note"
+        f"{'scene':<12} {'h (s)':>6} {'solver':<12} {'engine':<6} {'steps':>6} {'runs':>4} "
+        f"{'steps/s':>9} {'× real':>7} {'× np pgs':>8} {'÷ mj':>6} {'contacts':>8} "
+        f"{'subst':>5}  note"
     )
     lines = [head, "-" * len(head)]
     for r in rows:
         lines.append(
-            f"{r.scene:<12} {r.h:>7g} {r.solver:<10} {r.engine:<6} {r.steps:>6} "
-            f"{r.steps_per_s:>10,.0f} {r.ratio:>11.2f} {r.contacts:>8.1f}  {r.note}"
+            f"{r.scene:<12} {r.h:>6g} {r.solver:<12} {r.engine:<6} {r.steps:>6} {r.repeats:>4} "
+            f"{_num(r.steps_per_s, 9, ',.0f')} {_num(r.realtime, 7, '.1f')} "
+            f"{_num(r.ratio, 8, '.2f')} {_num(r.vs_mujoco, 6, '.2f')} "
+            f"{_num(r.contacts, 8, '.1f')} {_num(r.substeps, 5, '.2f')}  {r.note}"
         )
     return "\n".join(lines)
 
 
+def _num(x: float, width: int, spec: str) -> str:
+    return f"{'-':>{width}}" if not math.isfinite(x) else f"{x:>{width}{spec}}"
+
+
+def peer_summary(rows: list[BenchRow]) -> list[str]:
+    """One line per (h, our compiled solver) on the doll: ours ÷ each MuJoCo integrator."""
+    lines = []
+    for h in dict.fromkeys(r.h for r in rows):
+        here = [r for r in rows if r.scene == "doll" and r.h == h and math.isfinite(r.steps_per_s)]
+        mj = [r for r in here if r.engine == "mujoco"]
+        for ours in (r for r in here if r.engine == "fast"):
+            vs = ", ".join(
+                f"{ours.steps_per_s / m.steps_per_s:.2f}× MuJoCo {m.solver} "
+                f"({m.steps_per_s:,.0f}{', diverged' if m.note else ''})"
+                for m in mj
+            )
+            if vs:
+                lines.append(f"doll h={h:g}: {ours.solver} {ours.steps_per_s:,.0f} steps/s = {vs}")
+    return lines
+
+
+def stage_table(rows: dict[str, float]) -> str:
+    """Where the time goes: ``{stage: microseconds per step}`` as a table with each
+    stage's share of the total.  The numbers come from the compiled step's profiler
+    (solver.fast, in progress); this module does not estimate them."""
+    total = sum(rows.values())
+    head = f"{'stage':<28} {'µs/step':>9} {'share':>6}"
+    lines = [head, "-" * len(head)]
+    for name, us in rows.items():
+        share = us / total if total > 0 else NAN
+        lines.append(f"{name:<28} {us:>9.2f} {_num(100 * share, 5, '.1f')}%")
+    lines.append(f"{'total':<28} {total:>9.2f} {_num(100.0 if total > 0 else NAN, 5, '.1f')}%")
+    return "\n".join(lines)
+
+
 def csv_text(rows: list[BenchRow]) -> str:
-    """The rows as CSV."""
+    """The rows as CSV (every field; nan as ``nan``)."""
     fields = list(BenchRow.__dataclass_fields__)
-    out = [",".join(fields)]
-    out += [",".join(str(getattr(r, f)) for f in fields) for r in rows]
-    return "\n".join(out) + "\n"
+    out = io.StringIO()
+    writer = csv.writer(out, lineterminator="\n")
+    writer.writerow(fields)
+    writer.writerows([getattr(r, f) for f in fields] for r in rows)
+    return out.getvalue()

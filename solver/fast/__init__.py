@@ -173,14 +173,13 @@ def fast_step(model: Model, state: State, inp: StepInput | None = None) -> tuple
     )
     new = State(**fields) if type(state) is State else replace(state, **fields)
     fm.last = (new, (*out[:8], warm_key, warm_lam))
-    report = StepReport(
-        int(rep_i[0]),
-        int(rep_i[1]),
-        int(rep_i[2]),
-        float(rep_f[0]),
-        SOLVER_NAMES[rep_i[3]],
-        rep_f[1:4].copy(),
-        rep_f[4:7].copy(),
-        rep_f[7:10].copy(),
-    )
-    return new, report
+    return new, kernel_report(rep_i, rep_f)
+
+
+def kernel_report(rep_i: np.ndarray, rep_f: np.ndarray) -> StepReport:
+    """The StepReport of the kernel's report arrays (rows, contacts, iterations, solver;
+    residual, grip force, grip torque, touch force)."""
+    return StepReport(
+        int(rep_i[0]), int(rep_i[1]), int(rep_i[2]), float(rep_f[0]), SOLVER_NAMES[rep_i[3]],
+        rep_f[1:4].copy(), rep_f[4:7].copy(), rep_f[7:10].copy(),
+    )  # fmt: skip

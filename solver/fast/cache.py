@@ -3,9 +3,9 @@
 numba invalidates a cached function only when *its own* file changes; the step kernel
 inlines functions from every module of this package, from ``solver.pgs`` (the PGS
 kernels) and ``solver.substep`` (the substep criterion), and freezes constants read
-from ``solver.rows`` (row kinds, key layout), ``solver.integrate``, ``solver.direct``
-and ``solver.stabilize`` (passes, rounds, tolerances), so an edit there would leave a
-stale kernel in the cache.
+from ``solver.rows`` (row kinds, key layout), ``solver.integrate``, ``solver.direct``,
+``solver.hybrid`` and ``solver.stabilize`` (passes, rounds, tolerances), so an edit
+there would leave a stale kernel in the cache.
 ``ensure_fresh_cache`` fingerprints all of those sources and, when the fingerprint
 changed, deletes this package's cached kernels
 (``__pycache__/*.nbi``/``*.nbc``) so numba recompiles them.  Cache locations other than
@@ -19,7 +19,9 @@ import os
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
-NUMPY_SOURCES = ("pgs.py", "rows.py", "integrate.py", "direct.py", "stabilize.py", "substep.py")
+NUMPY_SOURCES = (
+    "pgs.py", "rows.py", "integrate.py", "direct.py", "stabilize.py", "substep.py", "hybrid.py",
+)  # fmt: skip
 SOURCES = tuple(HERE.parent / name for name in NUMPY_SOURCES)
 
 

@@ -1,31 +1,40 @@
-"""Compiled hybrid solve (solver.hybrid): joints exact by the tree, bounded rows by PGS.
+"""Compiled hybrid solve (solver.hybrid): joints and grip exact by the tree, the active
+bounded rows by PGS on their Schur complement, dormant rows checked afterwards.
 
-The equality rows E are the joint nodes' rows (anchors, then rheology: the first ``ne``
-rows of the table); the bounded rows U (limits, contacts, friction, grip) follow.  With
-the forest factored once (solver.fast.tree.tree_factor), each U row r costs one
-substitution: the body right-hand side J_rᵀ gives the velocity change of every body per
-unit λ_r with the joints holding, so the column S[:, r] = J_U y⁽ʳ⁾ + C_r e_r of the
-Delassus operator through the joints.  The base substitution (U forces zero) gives
-s = J_U (v_free + y⁽⁰⁾) + β_U.  After PGS on S (solver.pgs.dense_pgs), one more
-substitution with the U forces folded into v_free gives λ_E and the velocities.
-Cost: (|U| + 2) substitutions of O(nodes) 6×6 blocks and an O(|U|²) PGS sweep.
+The joints' rows are the first ``ne`` rows of the table; grip rows are rows grip0 …
+grip0 + ngrip − 1 (a node of the forest while inside their bounds, pinned at a bound
+otherwise, as in the direct solve); every other row is iterated (U) or dormant (solver.
+hybrid.dormant_rows).  With the forest factored once per round (tree_factor), each U
+row r costs one substitution: the body right-hand side J_rᵀ gives every body's velocity
+change per unit λ_r with the joints and grip holding, so S[:, r] = J_U y⁽ʳ⁾ + C_r e_r; it
+runs forward only on the root paths of r's bodies and backward only on those of the U
+rows' bodies.  The base substitution (U forces zero) gives s = J_U (v_free + y⁽⁰⁾) + β_U.
+After PGS on S (solver.pgs.dense_pgs), one more substitution with the U forces folded
+into v_free gives λ of the exact rows and the velocities.  Without U rows one
+substitution does it all.
 """
 
 from __future__ import annotations
 
+import inspect
+
 import numpy as np
 from numba import njit
 
+from solver import hybrid
 from solver.fast.post import apply_rows
 from solver.fast.tree import (
+    forest_sequence,
     init_nodes,
     init_rhs,
-    node_rows,
     row_velocity,
     tree_factor,
     tree_substitute,
 )
 from solver.pgs import dense_pgs
+from solver.rows import KIND_GRIP
+
+ROUNDS = inspect.signature(hybrid.hybrid_solve).parameters["rounds"].default
 
 
 @njit(cache=True, error_model="numpy")
@@ -54,23 +63,15 @@ def _mark_path(body, parent, movable, mark, tag):
 
 
 @njit(cache=True, error_model="numpy")
-def _schur(rw, ne, n, seq, nseq, parent, nb, size, tw, movable, x):
-    """S (nu, nu) column by column (module docstring).  A column's right-hand side sits on
-    two bodies, and S needs the solution only at the U rows' bodies: each substitution runs
-    forward on the two bodies' root paths and backward on the U bodies' root paths."""
-    nu = n - ne
+def _schur(rw, its, nu, seq, nseq, parent, nb, size, tw, movable, x):
+    """S (nu, nu) over the rows its[:nu], column by column (module docstring)."""
     s_mat = np.empty((nu, nu))
     path, needed = np.zeros(len(parent), np.int64), np.zeros(len(parent), np.int64)
-    for i in range(ne, n):
-        _mark_path(rw[0][i], parent, movable, needed, 1)
-        _mark_path(rw[1][i], parent, movable, needed, 1)
-    for q in range(nseq):
-        i = seq[q]
-        if needed[i] == 1:
-            for c in range(6):
-                x[i, c] = 0.0
+    for i in range(nu):
+        _mark_path(rw[0][its[i]], parent, movable, needed, 1)
+        _mark_path(rw[1][its[i]], parent, movable, needed, 1)
     for k in range(nu):
-        r = ne + k
+        r = its[k]
         _mark_path(rw[0][r], parent, movable, path, k + 1)
         _mark_path(rw[1][r], parent, movable, path, k + 1)
         for q in range(nseq):
@@ -87,7 +88,7 @@ def _schur(rw, ne, n, seq, nseq, parent, nb, size, tw, movable, x):
                 x[b, c] += rw[3][r, c]
         tree_substitute(seq, nseq, parent, nb, size, tw, x, path, k + 1, needed, 1)
         for i in range(nu):
-            s_mat[i, k] = _body_dot(rw, ne + i, x, movable)
+            s_mat[i, k] = _body_dot(rw, its[i], x, movable)
         s_mat[k, k] += rw[6][r]
     for i in range(nu):
         for k in range(i):
@@ -96,8 +97,8 @@ def _schur(rw, ne, n, seq, nseq, parent, nb, size, tw, movable, x):
 
 
 @njit(cache=True, error_model="numpy")
-def _solve_joints(seq, nseq, parent, nb, rw, vel, rows, size, tw, movable, lam, out):
-    """λ_E and out = vel + y for the factored forest with v_free replaced by ``vel``."""
+def _solve_exact(seq, nseq, parent, nb, rw, vel, rows, size, tw, movable, lam, out):
+    """λ of the forest's rows and out = vel + y, with v_free replaced by ``vel``."""
     x = tw[2]
     init_rhs(seq, nseq, nb, rw, vel, rows, size, x)
     every = np.zeros(len(parent), np.int64)
@@ -117,41 +118,113 @@ def _solve_joints(seq, nseq, parent, nb, rw, vel, rows, size, tw, movable, lam, 
 
 
 @njit(cache=True, error_model="numpy")
-def hybrid_solve(m, tree, ws, opt, rw, n, ne, vel_free, lam0, iterations):
-    """(ok, λ, v, sweeps, residual); ok False when the joint system is degenerate."""
-    order, parent, rheo_start, _, seq, rows, size, tw = tree
-    nb = len(vel_free)
-    movable = m[16]
-    nseq = 0
-    for i in order:
-        seq[nseq] = i
-        nseq += 1
-        size[i] = node_rows(i, nb, rheo_start, rows[i])
-    lam = np.zeros(n)
-    vel = np.empty_like(vel_free)
-    init_nodes(seq, nseq, nb, rw, vel_free, opt[0], m[15], ws[7], rows, size, tw[0], tw[2])
-    if not tree_factor(seq, nseq, parent, nb, rw, rows, size, tw):
-        return False, lam, vel, 0, 0.0
-    nu = n - ne
-    _solve_joints(seq, nseq, parent, nb, rw, vel_free, rows, size, tw, movable, lam, vel)
-    if nu == 0:
-        return True, lam, vel, 0, 0.0
-    s_vec = np.empty(nu)
-    lo, hi, fric, mu = np.empty(nu), np.empty(nu), np.empty(nu, np.int64), np.empty(nu)
+def dormant_rows(rw, n, lam0):
+    """solver.hybrid.dormant_rows on the table's first n rows."""
+    out = np.zeros(n, dtype=np.bool_)
+    for i in range(n):
+        if rw[4][i] == 0.0 and rw[5][i] == np.inf and rw[8][i] < 0:
+            out[i] = lam0[i] == 0.0 and rw[7][i] > 0.0
+    for i in range(n):
+        if rw[8][i] >= 0:
+            out[i] = out[rw[8][i]]
+    return out
+
+
+@njit(cache=True, error_model="numpy")
+def _iterate(rw, its, nu, s_vec, lam0, iterations):
+    """PGS on S's rows: bounds, friction (indices local to its) and warm start."""
+    lo, hi, fric, mu, start = (np.empty(nu), np.empty(nu), np.full(nu, -1, np.int64),
+                               np.empty(nu), np.empty(nu))  # fmt: skip
+    local = np.full(len(rw[0]), -1, np.int64)
     for i in range(nu):
-        r = ne + i
-        s_vec[i] = row_velocity(rw, r, vel) + rw[7][r]
-        lo[i], hi[i], mu[i] = rw[4][r], rw[5][r], rw[9][r]
-        fric[i] = rw[8][r] - ne if rw[8][r] >= 0 else -1
-    s_mat = _schur(rw, ne, n, seq, nseq, parent, nb, size, tw, movable, tw[2])
-    lam_u, sweeps, residual = dense_pgs(
-        s_mat, s_vec, lo, hi, fric, mu, lam0[ne:n].copy(), iterations, 1e-12
-    )
+        local[its[i]] = i
+    for i in range(nu):
+        r = its[i]
+        lo[i], hi[i], mu[i], start[i] = rw[4][r], rw[5][r], rw[9][r], lam0[r]
+        if rw[8][r] >= 0:
+            fric[i] = local[rw[8][r]]
+    return lo, hi, fric, mu, start
+
+
+@njit(cache=True, error_model="numpy")
+def _round(m, tree, ws, opt, rw, n, lam, vel_p, its, nu, free_grip, ngrip, body, lam0, iters):
+    """One solve with the current sets: (ok, v, sweeps, residual); fills λ."""
+    _, parent, _, _, seq, rows, size, tw = tree
+    nb, movable = len(vel_p), m[16]
+    nseq = forest_sequence(tree, nb, movable, free_grip, ngrip, body)
+    init_nodes(seq, nseq, nb, rw, vel_p, opt[0], m[15], ws[7], rows, size, tw[0], tw[2])
+    vel = np.empty_like(vel_p)
+    if not tree_factor(seq, nseq, parent, nb, rw, rows, size, tw):
+        return False, vel, 0, 0.0
+    if nu == 0:
+        _solve_exact(seq, nseq, parent, nb, rw, vel_p, rows, size, tw, movable, lam, vel)
+        return True, vel, 0, 0.0
+    _solve_exact(seq, nseq, parent, nb, rw, vel_p, rows, size, tw, movable, lam, vel)
+    s_vec = np.empty(nu)
+    for i in range(nu):
+        s_vec[i] = row_velocity(rw, its[i], vel) + rw[7][its[i]]
+    s_mat = _schur(rw, its, nu, seq, nseq, parent, nb, size, tw, movable, tw[2])
+    lo, hi, fric, mu, start = _iterate(rw, its, nu, s_vec, lam0, iters)
+    lam_u, sweeps, residual = dense_pgs(s_mat, s_vec, lo, hi, fric, mu, start, iters, 1e-12)
     chosen = np.zeros(n, dtype=np.bool_)
     for i in range(nu):
-        lam[ne + i] = lam_u[i]
-        chosen[ne + i] = True
-    pushed = vel_free.copy()
+        lam[its[i]] = lam_u[i]
+        chosen[its[i]] = True
+    pushed = vel_p.copy()
     apply_rows(rw, chosen, ws[1], ws[2], lam, pushed)
-    _solve_joints(seq, nseq, parent, nb, rw, pushed, rows, size, tw, movable, lam, vel)
+    _solve_exact(seq, nseq, parent, nb, rw, pushed, rows, size, tw, movable, lam, vel)
+    return True, vel, sweeps, residual
+
+
+@njit(cache=True, error_model="numpy")
+def hybrid_solve(m, tree, ws, opt, rw, n, ne, vel_free, lam0, iterations, grip):
+    """(ok, λ, v, sweeps, residual) as solver.hybrid.hybrid_solve; ok False when the
+    exact system is degenerate."""
+    grip0, ngrip, body = grip
+    dormant = dormant_rows(rw, n, lam0)
+    at_lo, at_hi = np.zeros(n, dtype=np.bool_), np.zeros(n, dtype=np.bool_)
+    its, free_grip = np.empty(n, np.int64), np.empty(6, np.int64)
+    lam = np.zeros(n)
+    vel, sweeps, residual = vel_free.copy(), 0, 0.0
+    for _ in range(ROUNDS):
+        nu, nfree = 0, 0
+        for i in range(ne, n):
+            lam[i] = rw[4][i] if at_lo[i] else rw[5][i] if at_hi[i] else 0.0
+            if rw[11][i] == KIND_GRIP:
+                if not (at_lo[i] or at_hi[i]):
+                    free_grip[nfree], nfree = i, nfree + 1
+            elif not dormant[i]:
+                its[nu], nu = i, nu + 1
+        vel_p = vel_free.copy()
+        apply_rows(rw, at_lo | at_hi, ws[1], ws[2], lam, vel_p)
+        ok, vel, sweeps, residual = _round(
+            m, tree, ws, opt, rw, n, lam, vel_p, its, nu, free_grip, nfree, body, lam0,
+            iterations,
+        )  # fmt: skip
+        if not ok:
+            return False, lam, vel, 0, 0.0
+        if not _update_sets(rw, ne, n, lam, vel, grip0, ngrip, dormant, at_lo, at_hi):
+            return True, lam, vel, sweeps, residual
+    for i in range(n):
+        lam[i] = min(max(lam[i], rw[4][i]), rw[5][i])
     return True, lam, vel, sweeps, residual
+
+
+@njit(cache=True, error_model="numpy")
+def _update_sets(rw, ne, n, lam, vel, grip0, ngrip, dormant, at_lo, at_hi):
+    """Wake crossed dormant rows (and their friction), pin and free grip rows; True when
+    anything changed."""
+    changed = False
+    for i in range(ne, n):
+        r = row_velocity(rw, i, vel) + rw[6][i] * lam[i] + rw[7][i]
+        if dormant[i] and rw[8][i] < 0 and r < 0.0:
+            dormant[i], changed = False, True
+        elif grip0 <= i < grip0 + ngrip:
+            if (at_hi[i] and r > 0.0) or (at_lo[i] and r < 0.0):
+                at_lo[i], at_hi[i], changed = False, False, True
+            elif not (at_lo[i] or at_hi[i]) and (lam[i] < rw[4][i] or lam[i] > rw[5][i]):
+                at_lo[i], at_hi[i], changed = lam[i] < rw[4][i], lam[i] > rw[5][i], True
+    for i in range(ne, n):
+        if rw[8][i] >= 0 and dormant[i] and not dormant[rw[8][i]]:
+            dormant[i] = False
+    return changed

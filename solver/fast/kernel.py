@@ -45,7 +45,7 @@ from solver.fast.post import (
     state_ok,
 )
 from solver.fast.rows import ZERO, anchor_rows, limit_rows, rheology_rows
-from solver.fast.tree import node_rows, row_velocity, tree_solve
+from solver.fast.tree import forest_sequence, row_velocity, tree_solve
 from solver.pgs import pgs_solve
 from solver.rows import KIND_GRIP, KIND_RHEOLOGY
 from solver.substep import substeps_needed
@@ -180,19 +180,9 @@ def warm_start(opt, iopt, st, rw, n):
 def _tree_pass(m, tree, ws, opt, rw, vel_free, free_grip, ngrip, body, lam):
     """λ of the joint rows and the free grip rows by the tree elimination (pinned rows'
     forces are already in vel_free); False when the system is degenerate."""
-    order, parent, rheo_start, _, seq, rows, size, tw = tree
+    _, parent, _, _, seq, rows, size, tw = tree
     nb = len(vel_free)
-    node = nb + len(rheo_start)
-    nseq = 0
-    if ngrip:
-        seq[0], nseq = node, 1
-        parent[node] = body if m[16][body] > 0.0 else -1
-        size[node] = ngrip
-        rows[node, :ngrip] = free_grip[:ngrip]
-    for i in order:
-        seq[nseq] = i
-        nseq += 1
-        size[i] = node_rows(i, nb, rheo_start, rows[i])
+    nseq = forest_sequence(tree, nb, m[16], free_grip, ngrip, body)
     return tree_solve(
         seq, nseq, parent, nb, rw, vel_free, opt[0], m[15], ws[7], rows, size, tw, lam
     )
@@ -267,7 +257,7 @@ def solve(m, tree, ws, opt, iopt, st, n, vel_free, grip):
         while ne < n and rw[11][ne] <= KIND_RHEOLOGY:
             ne += 1
         ok, lam, vel, sweeps, residual = hybrid_solve(
-            m, tree, ws, opt, rw, n, ne, vel_free, lam0, iopt[1]
+            m, tree, ws, opt, rw, n, ne, vel_free, lam0, iopt[1], grip
         )
         if not ok:
             return FALLBACK, lam, vel, 0, 0.0, SOLVER_HYBRID
@@ -369,3 +359,33 @@ def step_kernel(m, g, tree, ptree, ws, pws, opt, iopt, st, inp):
     report(rw, n, lam, rep_f)
     tick(prof, on, 7, t)
     return OK, out, keys[order], lam[order], rep_i, rep_f
+
+
+@njit(cache=True, error_model="numpy")
+def inplace_kernel(m, g, tree, ptree, ws, pws, opt, iopt, buf, warm, inp, rep_i, rep_f):
+    """``step_kernel`` on state arrays updated in place (solver.fast.sim.Sim).
+
+    buf: (x, q, v, ω, q_sf, yielded, anchor, τ_avg, τ); warm: (keys, λ, count (1,)) with
+    room for every row; rep_i (4,), rep_f (10,) receive the report.  Returns (status,
+    substeps asked for); on a status other than OK nothing was written."""
+    nw = warm[2][0]
+    st = (buf[0], buf[1], buf[2], buf[3], buf[4], buf[5], buf[6], buf[7], warm[0][:nw],
+          warm[1][:nw])  # fmt: skip
+    status, out, keys, lam, ri, rf = step_kernel(m, g, tree, ptree, ws, pws, opt, iopt, st, inp)
+    if status:
+        return status, ri[0]
+    buf[0][:, :] = out[0]
+    buf[1][:, :] = out[1]
+    buf[2][:, :] = out[2]
+    buf[3][:, :] = out[3]
+    buf[4][:, :] = out[4]
+    buf[5][:] = out[5]
+    buf[6][:, :] = out[6]
+    buf[7][:] = out[7]
+    buf[8][:, :] = out[8]
+    for i in range(len(keys)):
+        warm[0][i], warm[1][i] = keys[i], lam[i]
+    warm[2][0] = len(keys)
+    rep_i[:] = ri
+    rep_f[:] = rf
+    return OK, 0

@@ -279,6 +279,27 @@ def tree_substitute(seq, nseq, parent, nb, size, tw, x, fwd, fwd_tag, bwd, bwd_t
 
 
 @njit(cache=True, error_model="numpy")
+def forest_sequence(tree, nb, movable, free_grip, ngrip, body):
+    """Fill the elimination sequence (seq, parent, rows, size of ``tree``) for the joint
+    forest and, with ngrip > 0, the grip's node of the rows free_grip[:ngrip], a leaf of
+    the gripped body (its own root when the body cannot move); returns its length."""
+    order, parent, rheo_start, _, seq, rows, size, _ = tree
+    node = nb + len(rheo_start)
+    nseq = 0
+    if ngrip:
+        seq[0], nseq = node, 1
+        parent[node] = body if movable[body] > 0.0 else -1
+        size[node] = ngrip
+        for k in range(ngrip):
+            rows[node, k] = free_grip[k]
+    for i in order:
+        seq[nseq] = i
+        nseq += 1
+        size[i] = node_rows(i, nb, rheo_start, rows[i])
+    return nseq
+
+
+@njit(cache=True, error_model="numpy")
 def tree_solve(seq, nseq, parent, nb, rw, vel_free, h, mass, inertia_w, rows, size, tw, lam):
     """λ of the two-sided rows by block elimination over the forest (module docstring).
 

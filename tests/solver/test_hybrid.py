@@ -11,13 +11,16 @@ import pytest
 from rigbuild import chain, rheology
 from test_solvers import contact_scene, lcp_violation, problem, run_pgs
 
-from solver.hybrid import equality_rows, hybrid_solve
+from solver import quat
+from solver.grip import Pointer, make_coupling
+from solver.hybrid import dormant_rows, equality_rows, hybrid_solve
 from solver.model import build_model
 from solver.pgs import dense_pgs
 from solver.reference import reference_solve
 from solver.response import dense_system
+from solver.rows import KIND_GRIP
 from solver.spec import ShapeSpec
-from solver.state import initial_state
+from solver.state import StepInput, initial_state
 from solver.step import step
 from solver.stress_cases import free_bodies
 
@@ -96,3 +99,52 @@ def test_auto_uses_hybrid_with_contacts_and_direct_without():
     assert solvers == {"direct", "hybrid"}
     bare = build_model(chain(4, 0.005, rheo=rheology(1.0, 0.1, 5.0)))
     assert step(bare, initial_state(bare))[1].solver == "direct"
+
+
+def test_a_dormant_contact_wakes_when_the_body_would_cross_it():
+    # A ball 5 mm above the ground falling at 2 m/s, h = 5 ms: its speculative contact
+    # (no force last step, bias = gap/h = 1 m/s > 0) starts dormant; the solve finds
+    # the ball would cross, wakes it, and the ball lands with the reference's velocity:
+    # the approach the speculative row allows, gap/h.
+    ball = ShapeSpec("sphere", radius=0.05)
+    model = free_bodies([(ball, np.array([0.0, 0.05, 0.0]), np.array([0.0, 0.06, 0.0]))], 0.005,
+                        gravity=True, ground=True)  # fmt: skip
+    state = replace(initial_state(model), body_vel=np.array([[0.0, -2.0, 0.0]]))
+    gap = float(state.body_pos[0, 1]) - 0.05
+    rows, resp, vel_free, ncontact = problem(model, state)
+    assert ncontact == 1 and gap == pytest.approx(0.005)
+    lam0 = np.zeros(len(rows))
+    assert dormant_rows(rows, lam0).all()
+    q, c = dense_system(rows, resp, vel_free)
+    lam_ref = reference_solve(q, c, rows.lo, rows.hi, rows.fric_of, rows.mu)
+    lam, _, _ = hybrid_solve(rows, resp, vel_free, lam0, 200)
+    assert lam[0] > 0.0
+    vel = velocities(rows, resp, vel_free, lam)
+    assert np.abs(vel - velocities(rows, resp, vel_free, lam_ref)).max() < 1e-9
+    assert vel[0, 1] == pytest.approx(-gap / model.options.h, rel=1e-5)
+
+
+@pytest.mark.parametrize("limit", [0.05, 0.3, 1e6])
+def test_grip_at_its_force_limit_with_contacts_equals_the_reference(limit):
+    # contact_scene's balls on the ground (one contact each, frictionless: unique
+    # forces) with a grip pulling the last ball up and sideways: the hybrid pins the
+    # saturated grip rows as the direct solve does and matches the exact box-QP.
+    model, state = contact_scene(5)
+    b = model.nbody - 1
+    centre = state.body_pos[b]
+    here = Pointer(centre, quat.IDENTITY, np.zeros(3), np.zeros(3))
+    coupling = make_coupling(state, here, b, centre, stiffness=2000.0, damping=40.0,
+                             rot_stiffness=50.0, rot_damping=2.0, force_limit=limit,
+                             torque_limit=limit)  # fmt: skip
+    ptr = Pointer(centre + [0.05, 0.3, 0.0], quat.IDENTITY, np.zeros(3), np.zeros(3))
+    inp = StepInput(pointer=ptr, coupling=coupling)
+    rows, resp, vel_free, ncontact = problem(model, state, inp)
+    assert ncontact > 0
+    rows = replace(rows, mu=np.zeros(len(rows)))
+    q, c = dense_system(rows, resp, vel_free)
+    lam_ref = reference_solve(q, c, rows.lo, rows.hi, rows.fric_of, rows.mu)
+    lam, _, _ = hybrid_solve(rows, resp, vel_free, np.zeros(len(rows)), 3000)
+    vel, vel_ref = (velocities(rows, resp, vel_free, x) for x in (lam, lam_ref))
+    assert np.abs(vel - vel_ref).max() < 1e-7
+    grip = rows.kind == KIND_GRIP
+    assert np.isclose(np.abs(lam[grip]), limit).any() == (limit < 100.0)

@@ -1,0 +1,106 @@
+"""``puppetcli bench``'s speed table: its scene, its rows and ratios, the stage-table hook
+and the peers switch (no timing is asserted)."""
+
+from __future__ import annotations
+
+import csv
+import math
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from puppetcli import bench, peers
+from puppetcli.bench import BenchRow, grip_inputs, measure, repeats_for, stage_table
+from puppetcli.commands.bench import command
+from puppetcli.pointer import min_jerk
+
+
+def test_grip_inputs_start_at_the_grip_point_and_follow_the_lift():
+    model = bench.doll_scenes()["doll"].with_options(h=0.01)
+    tail = model.bone_tail0[model.bone_names.index(bench.GRIP_BONE)]
+    inputs = grip_inputs(model, 0.5, 80)  # lift over 50 steps, then 30 still
+    assert len(inputs) == 80
+    assert np.allclose(inputs[0].coupling.offset, 0.0)  # gripped where the pointer was
+    assert inputs[0].coupling.position_only and inputs[0].coupling.stiffness == 2000.0
+    for k in (0, 10, 25, 49, 79):
+        expected = tail + min_jerk((k + 1) * 0.01 / 0.5) * bench.LIFT
+        assert np.allclose(inputs[k].pointer.pos, expected, atol=1e-12)
+    # Mean velocities over the steps add up to the whole displacement.
+    total = sum(inp.pointer.vel for inp in inputs) * 0.01
+    assert np.allclose(total, bench.LIFT, atol=1e-12)
+
+
+def test_repeats_time_enough_steps():
+    assert repeats_for(25, "fast") * 25 >= bench.MIN_TIMED_STEPS["fast"]
+    assert repeats_for(5000, "fast") == bench.MIN_REPEATS["fast"]
+    assert repeats_for(500, "numpy") == 1
+
+
+def test_stage_table_shares_add_up():
+    text = stage_table({"rows": 10.0, "pgs": 30.0, "integrate": 10.0})
+    lines = {ln.split()[0]: ln.split()[1:] for ln in text.splitlines()[2:]}
+    assert lines["pgs"] == ["30.00", "60.0%"] and lines["rows"] == ["10.00", "20.0%"]
+    assert lines["total"] == ["50.00", "100.0%"]
+
+
+def _by(rows, scene, solver, engine) -> BenchRow:
+    (row,) = [r for r in rows if (r.scene, r.solver, r.engine) == (scene, solver, engine)]
+    return row
+
+
+@pytest.fixture(scope="module")
+def tiny_rows():
+    return measure(bench.doll_scenes(), [0.02], ["pgs", "direct"], 0.04)
+
+
+def test_measure_rows_against_the_numpy_baseline(tiny_rows):
+    assert {(r.scene, r.solver, r.engine) for r in tiny_rows} == {
+        (s, solver, engine)
+        for s in ("doll", "doll-joints")
+        for solver, engine in (("pgs", "numpy"), ("pgs", "fast"), ("direct", "fast"))
+    }
+    for scene in ("doll", "doll-joints"):
+        base = _by(tiny_rows, scene, "pgs", "numpy")
+        fast = _by(tiny_rows, scene, "pgs", "fast")
+        assert base.ratio == 1.0 and fast.ratio == pytest.approx(
+            fast.steps_per_s / base.steps_per_s
+        )
+        assert fast.steps == 2 and fast.realtime == pytest.approx(0.04 / fast.seconds)
+    direct = _by(tiny_rows, "doll", "direct", "fast")  # contacts and limits: cannot run
+    assert direct.note.startswith("n/a") and math.isnan(direct.steps_per_s)
+    assert _by(tiny_rows, "doll-joints", "direct", "fast").steps_per_s > 0
+    # Only the doll has a ground: its feet's speculative contacts, none without it.
+    assert _by(tiny_rows, "doll", "pgs", "fast").contacts > 0
+    assert _by(tiny_rows, "doll-joints", "pgs", "fast").contacts == 0
+
+
+def test_peers_rows_sit_beside_ours():
+    pytest.importorskip("mujoco")
+    rows = measure({"doll": bench.doll_scenes()["doll"]}, [0.02], ["pgs"], 0.1, peers=True)
+    euler = _by(rows, "doll", "euler", "mujoco")
+    _by(rows, "doll", "implicitfast", "mujoco")
+    ours = _by(rows, "doll", "pgs", "fast")
+    assert euler.vs_mujoco == 1.0 and euler.steps == ours.steps
+    assert ours.vs_mujoco == pytest.approx(ours.steps_per_s / euler.steps_per_s)
+    (line,) = bench.peer_summary(rows)
+    assert line.startswith("doll h=0.02: pgs") and "MuJoCo implicitfast" in line
+
+
+def test_cli_peers_without_mujoco_carries_on(tmp_path, monkeypatch):
+    monkeypatch.setattr(peers, "mujoco_version", lambda: None)
+    out = tmp_path / "bench.csv"
+    args = ["--peers", "--h", "0.02", "--seconds", "0.02", "--solver", "pgs", "--csv", str(out)]
+    result = CliRunner().invoke(command, args)
+    assert result.exit_code == 0, result.output
+    assert result.output.count("pip install '.[bench]'") == 1
+    with open(out, newline="") as f:
+        reader = csv.DictReader(f)
+        table = list(reader)
+    assert reader.fieldnames == list(BenchRow.__dataclass_fields__)
+    assert [(t["scene"], t["solver"], t["engine"]) for t in table] == [
+        ("doll", "pgs", "numpy"),
+        ("doll", "pgs", "fast"),
+        ("doll-joints", "pgs", "numpy"),
+        ("doll-joints", "pgs", "fast"),
+    ]
