@@ -272,15 +272,14 @@ def peer_summary(rows: list[BenchRow]) -> list[str]:
 
 def stage_table(rows: dict[str, float]) -> str:
     """Where the time goes: ``{stage: microseconds per step}`` as a table with each
-    stage's share of the total.  The numbers come from the compiled step's profiler
-    (solver.fast, in progress); this module does not estimate them."""
+    stage's share of the total (``doll_stages``: the compiled step's own profiler)."""
     total = sum(rows.values())
-    head = f"{'stage':<28} {'µs/step':>9} {'share':>6}"
+    head = f"{'stage':<40} {'µs/step':>9} {'share':>6}"
     lines = [head, "-" * len(head)]
     for name, us in rows.items():
         share = us / total if total > 0 else NAN
-        lines.append(f"{name:<28} {us:>9.2f} {_num(100 * share, 5, '.1f')}%")
-    lines.append(f"{'total':<28} {total:>9.2f} {_num(100.0 if total > 0 else NAN, 5, '.1f')}%")
+        lines.append(f"{name:<40} {us:>9.2f} {_num(100 * share, 5, '.1f')}%")
+    lines.append(f"{'total':<40} {total:>9.2f} {_num(100.0 if total > 0 else NAN, 5, '.1f')}%")
     return "\n".join(lines)
 
 
@@ -292,3 +291,12 @@ def csv_text(rows: list[BenchRow]) -> str:
     writer.writerow(fields)
     writer.writerows([getattr(r, f) for f in fields] for r in rows)
     return out.getvalue()
+
+
+def doll_stages(h: float, seconds: float) -> dict[str, float]:
+    """µs per step of each stage of the compiled step on the doll grip scene (auto)."""
+    from solver.fast.bench import stage_profile
+
+    model = doll_scenes()["doll"].with_options(h=h, method="auto")
+    inputs = grip_inputs(model, seconds, max(1, round(seconds / h)))
+    return stage_profile(model, initial_state(model), inputs)

@@ -226,15 +226,23 @@ def _run(
 _GROUPS = ((0, 1), (0, 2), (1, 1), (1, 2), (2, 2))
 
 
-def collide(geom: Geometry, body_pos: np.ndarray, body_quat: np.ndarray, margin: float) -> Contacts:
+def collide(
+    geom: Geometry,
+    body_pos: np.ndarray,
+    body_quat: np.ndarray,
+    margin: float,
+    cull: bool = True,
+) -> Contacts:
     """Contacts (depth ≥ −margin, m) of the candidate pairs of geom in the pose
-    body_pos (nb,3), body_quat (nb,4); see the module docstring for conventions."""
+    body_pos (nb,3), body_quat (nb,4); see the module docstring for conventions.
+    ``cull``: skip the narrow phase of pairs whose bounding spheres are apart by more
+    than the margin (it would find nothing there)."""
     a, b = geom.pair_a, geom.pair_b
     cls = _CLASS[geom.shape_kind]
     swap = cls[a] > cls[b]
     f, s = np.where(swap, b, a), np.where(swap, a, b)
     centre, rot = world_shapes(geom, body_pos, body_quat)
-    near = _near(geom, centre, rot, f, s, margin)
+    near = _near(geom, centre, rot, f, s, margin) if cull else np.ones(len(f), dtype=bool)
     parts = []
     for group in _GROUPS:
         sel = np.flatnonzero(near & (cls[f] == group[0]) & (cls[s] == group[1]))

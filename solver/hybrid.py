@@ -105,12 +105,14 @@ def hybrid_solve(
     iterations: int,
     tol: float = 1e-12,
     rounds: int = 20,
+    skip_dormant: bool = True,
 ) -> tuple[np.ndarray, int, float]:
     """(λ, sweeps, residual) (module docstring); sweeps and residual are those of the
-    last round's PGS on S (0 when nothing is iterated)."""
+    last round's PGS on S (0 when nothing is iterated).  ``skip_dormant`` False iterates
+    the dormant rows too (the unskipped path, for measuring the skip)."""
     q, c = dense_system(rows, resp, vel_free)
     joint, grip = equality_rows(rows), rows.kind == KIND_GRIP
-    dormant = dormant_rows(rows, lam0) & ~grip
+    dormant = dormant_rows(rows, lam0) & ~grip & skip_dormant
     at_lo, at_hi = np.zeros(len(rows), bool), np.zeros(len(rows), bool)
     for _ in range(rounds):
         pinned_lam = np.where(at_lo, rows.lo, np.where(at_hi, rows.hi, np.nan))

@@ -49,6 +49,11 @@ class Options:
         the simulation is declared numerically broken.
     max_substeps: most equal substeps a step may take when its joints' geometric
         stiffness needs them (solver.substep); 1 = never subdivide.
+    Skips of work a scene does not need (each measured by ``puppetcli bench --skips``
+    and tested to change nothing): cull_pairs: shape pairs whose bounding spheres are
+    farther apart than contact_margin get no narrow phase; dormant_rows: the hybrid
+    solve checks one-sided rows that neither pushed last step nor ask to push after the
+    solve instead of iterating them (solver.hybrid).
     """
 
     h: float = 0.005
@@ -68,6 +73,8 @@ class Options:
     max_angular_speed: float = 1000.0
     max_joint_gap: float = 0.05
     max_substeps: int = 64
+    cull_pairs: bool = True
+    dormant_rows: bool = True
 
 
 @dataclass(frozen=True)

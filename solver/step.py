@@ -68,8 +68,9 @@ def build_rows(
     ncontact = 0
     if model.has_collision:
         con = collide.collide(
-            model.geometry, state.body_pos, state.body_quat, model.options.contact_margin
-        )
+            model.geometry, state.body_pos, state.body_quat, model.options.contact_margin,
+            cull=model.options.cull_pairs,
+        )  # fmt: skip
         ncontact = len(con.key)
         if ncontact:
             blocks.append(contact_rows(model, con, state.body_pos, vel_free))
@@ -123,7 +124,9 @@ def solve(model: Model, state: State, rows: Rows, resp: tuple, vel_free: np.ndar
             return lam, _apply(rows, resp, vel_free, lam), 1, residual, "direct"
         lam0 = lam  # the active set did not settle: finish with PGS from there
     if method == "hybrid":
-        lam, sweeps, residual = hybrid_solve(rows, resp, vel_free, lam0, opt.iterations)
+        lam, sweeps, residual = hybrid_solve(
+            rows, resp, vel_free, lam0, opt.iterations, skip_dormant=opt.dormant_rows
+        )
         return lam, _apply(rows, resp, vel_free, lam), sweeps, residual, "hybrid"
     if method == "reference":
         q, c = dense_system(rows, resp, vel_free)

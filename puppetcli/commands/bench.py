@@ -11,9 +11,11 @@ from puppetcli.bench import (
     SOLVERS,
     csv_text,
     doll_scenes,
+    doll_stages,
     format_table,
     measure,
     peer_summary,
+    stage_table,
 )
 from puppetcli.outputs import write_text_atomic
 
@@ -74,6 +76,11 @@ SOLVER_CHOICES = [*SOLVERS, "reference"]
     help="Run the work-precision study instead (error against run time; ignores --h, "
     "--solver, --engine, --seconds, --csv).",
 )
+@click.option(
+    "--skips",
+    is_flag=True,
+    help="Measure each skip of unneeded work on and off instead (puppetcli/bench_skips.py).",
+)
 @click.option("--quick", is_flag=True, help="With --precision: fewer settings and steps (CI).")
 @click.option(
     "--out",
@@ -90,6 +97,7 @@ def command(
     csv_path: Path | None,
     peers: bool,
     precision: bool,
+    skips: bool,
     quick: bool,
     out_dir: Path | None,
 ) -> None:
@@ -103,12 +111,21 @@ def command(
     step, measured in the same run.  With --peers, MuJoCo (Euler and implicitfast) on
     the same doll scene, and the ratio of ours to it.
 
+    After the table, where a doll step's time goes, stage by stage (read from the
+    processor's cycle counter inside the compiled step).  With --skips: each skip of
+    unneeded work (pair culling, dormant rows, the direct solve) on and off.
+
     With --precision: the work-precision study (puppetcli/precision.py): creep against
     its exact solution, a 10-link chain after 1 s and 3 s and the gripped doll against
     converged references, for PGS (5/15/50 sweeps, warm start off/on/0.7), direct, auto
     and hybrid (15/50 sweeps) at h = 1, 5, 20 ms on the compiled step, with a verdict
     per scene against the paper's setting (PGS 15, warm start) at equal run time.
     """
+    if skips:
+        from puppetcli.bench_skips import format_skips, measure_skips
+
+        click.echo(format_skips(measure_skips(steps_h[0], seconds), steps_h[0]))
+        return
     use_peers = peers and _peers_available()
     if precision:
         _precision(quick, out_dir, use_peers)
@@ -118,9 +135,9 @@ def command(
     for line in peer_summary(rows):
         click.echo(line)
     click.echo(
-        "where the time goes: per-stage times of the compiled step are not measured yet "
-        "(puppetcli.bench.stage_table formats them once solver.fast reports them)"
+        f"\nwhere the time goes: doll, auto, h = {steps_h[0]:g} s (compiled step, per stage)"
     )
+    click.echo(stage_table(doll_stages(steps_h[0], seconds)))
     if csv_path is not None:
         write_text_atomic(csv_path, csv_text(rows))
 

@@ -177,11 +177,11 @@ def _round(m, tree, ws, opt, rw, n, lam, vel_p, its, nu, free_grip, ngrip, body,
 
 
 @njit(cache=True, error_model="numpy")
-def hybrid_solve(m, tree, ws, opt, rw, n, ne, vel_free, lam0, iterations, grip):
+def hybrid_solve(m, tree, ws, opt, rw, n, ne, vel_free, lam0, iterations, grip, skip):
     """(ok, λ, v, sweeps, residual) as solver.hybrid.hybrid_solve; ok False when the
-    exact system is degenerate."""
+    exact system is degenerate; ``skip``: leave dormant rows out of the iteration."""
     grip0, ngrip, body = grip
-    dormant = dormant_rows(rw, n, lam0)
+    dormant = dormant_rows(rw, n, lam0) if skip else np.zeros(n, dtype=np.bool_)
     at_lo, at_hi = np.zeros(n, dtype=np.bool_), np.zeros(n, dtype=np.bool_)
     its, free_grip = np.empty(n, np.int64), np.empty(6, np.int64)
     lam = np.zeros(n)

@@ -116,7 +116,7 @@ def build_rows(m, g, opt, iopt, st, rot, vel_free, inp, ws):
     if iopt[5] or ivec[0] == MODE_TOUCH:
         world_shapes(g, pos, quat, centre, srot)
     if iopt[5]:
-        ncontact = collide_scene(g, centre, srot, opt[4], cb)
+        ncontact = collide_scene(g, centre, srot, opt[4], cb, iopt[8])
         if ncontact < 0:
             return -1, 0, 0, 0
         n = contact_rows(cb, 0, ncontact, pos, vel_free, ZERO, h, opt[2], opt[3], rw, n)
@@ -257,7 +257,7 @@ def solve(m, tree, ws, opt, iopt, st, n, vel_free, grip):
         while ne < n and rw[11][ne] <= KIND_RHEOLOGY:
             ne += 1
         ok, lam, vel, sweeps, residual = hybrid_solve(
-            m, tree, ws, opt, rw, n, ne, vel_free, lam0, iopt[1], grip
+            m, tree, ws, opt, rw, n, ne, vel_free, lam0, iopt[1], grip, iopt[9]
         )
         if not ok:
             return FALLBACK, lam, vel, 0, 0.0, SOLVER_HYBRID

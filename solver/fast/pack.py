@@ -23,7 +23,7 @@ Tuple layouts:
        regularization, yield_filter_time, max_speed, max_angular_speed, max_joint_gap,
        warm_start_factor, gravity (3)
   iopt method (0 auto, 1 pgs, 2 direct, 3 hybrid), iterations, warm_start, has rheology,
-       has limits, has collision, max substeps, profiling on
+       has limits, has collision, max substeps, profiling on, cull pairs, dormant rows
 """
 
 from __future__ import annotations
@@ -134,6 +134,8 @@ def pack(model: Model) -> FastModel:
             model.has_collision,
             o.max_substeps,
             0,
+            o.cull_pairs,
+            o.dormant_rows,
         ],
         np.int64,
     )

@@ -81,42 +81,76 @@ def chol_solve(lo, m, b):
 
 @njit(cache=True, error_model="numpy")
 def _chol_block(dm, i, m, sign):
-    """dm[i, :m, :m] ← lower Cholesky factor of sign·dm[i] (lower triangle read), indexed
-    in place (no array views: they cost reference counting in the hot loop)."""
+    """dm[i, :m, :m] ← lower Cholesky factor L of sign·dm[i] (lower triangle read), with
+    the *reciprocal* 1/L_jj on the diagonal (the block solves multiply instead of
+    divide), indexed in place (no array views: they cost reference counting here)."""
     for j in range(m):
         d = sign * dm[i, j, j]
         for k in range(j):
             d -= dm[i, j, k] * dm[i, j, k]
         if not d > 0.0:
             return False
-        d = math.sqrt(d)
-        dm[i, j, j] = d
+        inv = 1.0 / math.sqrt(d)
+        dm[i, j, j] = inv
         for r in range(j + 1, m):
             s = sign * dm[i, r, j]
             for k in range(j):
                 s -= dm[i, r, k] * dm[i, j, k]
-            dm[i, r, j] = s / d
+            dm[i, r, j] = s * inv
+    return True
+
+
+@njit(cache=True, error_model="numpy")
+def _chol6(dm, i, sign):
+    """_chol_block of a 6×6 block (constant trip counts: the compiler unrolls them)."""
+    for j in range(6):
+        d = sign * dm[i, j, j]
+        for k in range(j):
+            d -= dm[i, j, k] * dm[i, j, k]
+        if not d > 0.0:
+            return False
+        inv = 1.0 / math.sqrt(d)
+        dm[i, j, j] = inv
+        for r in range(j + 1, 6):
+            s = sign * dm[i, r, j]
+            for k in range(j):
+                s -= dm[i, r, k] * dm[i, j, k]
+            dm[i, r, j] = s * inv
     return True
 
 
 @njit(cache=True, error_model="numpy")
 def _forward_block(dm, i, m, x):
-    """x[i, :m] ← L_i⁻¹ x[i, :m]."""
+    """x[i, :m] ← L_i⁻¹ x[i, :m] (reciprocal diagonal: _chol_block)."""
+    if m == 6:
+        for r in range(6):
+            s = x[i, r]
+            for k in range(r):
+                s -= dm[i, r, k] * x[i, k]
+            x[i, r] = s * dm[i, r, r]
+        return
     for r in range(m):
         s = x[i, r]
         for k in range(r):
             s -= dm[i, r, k] * x[i, k]
-        x[i, r] = s / dm[i, r, r]
+        x[i, r] = s * dm[i, r, r]
 
 
 @njit(cache=True, error_model="numpy")
 def _backward_block(dm, i, m, x):
-    """x[i, :m] ← L_i⁻ᵀ x[i, :m]."""
+    """x[i, :m] ← L_i⁻ᵀ x[i, :m] (reciprocal diagonal: _chol_block)."""
+    if m == 6:
+        for r in range(5, -1, -1):
+            s = x[i, r]
+            for k in range(r + 1, 6):
+                s -= dm[i, k, r] * x[i, k]
+            x[i, r] = s * dm[i, r, r]
+        return
     for r in range(m - 1, -1, -1):
         s = x[i, r]
         for k in range(r + 1, m):
             s -= dm[i, k, r] * x[i, k]
-        x[i, r] = s / dm[i, r, r]
+        x[i, r] = s * dm[i, r, r]
 
 
 @njit(cache=True, error_model="numpy")
@@ -200,15 +234,36 @@ def _coupling(i, p, nb, rw, rows, size, g):
 
 
 @njit(cache=True, error_model="numpy")
+def _eliminate6(i, p, sign, dm, y, g):
+    """_eliminate for 6×6 blocks (bodies and joints with rheology: most of a doll's
+    nodes), with constant trip counts the compiler unrolls."""
+    for c in range(6):
+        for r in range(6):
+            s = g[r, c]
+            for k in range(r):
+                s -= dm[i, r, k] * y[i, k, c]
+            y[i, r, c] = s * dm[i, r, r]
+    for a in range(6):
+        for b in range(a + 1):
+            s = 0.0
+            for k in range(6):
+                s += y[i, k, a] * y[i, k, b]
+            dm[p, a, b] -= sign * s
+
+
+@njit(cache=True, error_model="numpy")
 def _eliminate(i, p, m, mp, sign, dm, y, g):
     """With D_i = sign·L Lᵀ: Y = L⁻¹ G, D_p −= sign·YᵀY (lower triangles only: that is
-    what the factorisation reads)."""
+    what the factorisation reads; L's diagonal holds its reciprocal)."""
+    if m == 6 and mp == 6:
+        _eliminate6(i, p, sign, dm, y, g)
+        return
     for c in range(mp):
         for r in range(m):
             s = g[r, c]
             for k in range(r):
                 s -= dm[i, r, k] * y[i, k, c]
-            y[i, r, c] = s / dm[i, r, r]
+            y[i, r, c] = s * dm[i, r, r]
     for a in range(mp):
         for b in range(a + 1):
             s = 0.0
@@ -227,13 +282,45 @@ def tree_factor(seq, nseq, parent, nb, rw, rows, size, tw):
         i = seq[q]
         m = size[i]
         sign = 1.0 if i < nb else -1.0
-        if not _chol_block(dm, i, m, sign):
+        if not (_chol6(dm, i, sign) if m == 6 else _chol_block(dm, i, m, sign)):
             return False
         p = parent[i]
         if p >= 0:
             _coupling(i, p, nb, rw, rows, size, g)
             _eliminate(i, p, m, size[p], sign, dm, y, g)
     return True
+
+
+@njit(cache=True, error_model="numpy")
+def _fold_up(i, p, m, mp, sign, y, x):
+    """x_p −= sign·Y_iᵀ x_i (6×6 blocks with constant trip counts)."""
+    if m == 6 and mp == 6:
+        for a in range(6):
+            s = 0.0
+            for k in range(6):
+                s += y[i, k, a] * x[i, k]
+            x[p, a] -= sign * s
+        return
+    for a in range(mp):
+        s = 0.0
+        for k in range(m):
+            s += y[i, k, a] * x[i, k]
+        x[p, a] -= sign * s
+
+
+@njit(cache=True, error_model="numpy")
+def _take_down(i, p, m, mp, y, x):
+    """x_i −= Y_i x_p."""
+    if m == 6 and mp == 6:
+        for k in range(6):
+            s = 0.0
+            for c in range(6):
+                s += y[i, k, c] * x[p, c]
+            x[i, k] -= s
+        return
+    for k in range(m):
+        for c in range(mp):
+            x[i, k] -= y[i, k, c] * x[p, c]
 
 
 @njit(cache=True, error_model="numpy")
@@ -256,12 +343,7 @@ def tree_substitute(seq, nseq, parent, nb, size, tw, x, fwd, fwd_tag, bwd, bwd_t
         _forward_block(dm, i, m, x)
         p = parent[i]
         if p >= 0:
-            sign = 1.0 if i < nb else -1.0
-            for a in range(size[p]):
-                s = 0.0
-                for k in range(m):
-                    s += y[i, k, a] * x[i, k]
-                x[p, a] -= sign * s
+            _fold_up(i, p, m, size[p], 1.0 if i < nb else -1.0, y, x)
     for q in range(nseq - 1, -1, -1):  # x_i = sign·L⁻ᵀ(L⁻¹ z_i − Y x_p), parents first
         i = seq[q]
         if bwd[i] != bwd_tag:
@@ -269,9 +351,7 @@ def tree_substitute(seq, nseq, parent, nb, size, tw, x, fwd, fwd_tag, bwd, bwd_t
         p = parent[i]
         m = size[i]
         if p >= 0:
-            for k in range(m):
-                for c in range(size[p]):
-                    x[i, k] -= y[i, k, c] * x[p, c]
+            _take_down(i, p, m, size[p], y, x)
         _backward_block(dm, i, m, x)
         sign = 1.0 if i < nb else -1.0
         for k in range(m):

@@ -104,3 +104,25 @@ def test_cli_peers_without_mujoco_carries_on(tmp_path, monkeypatch):
         ("doll-joints", "pgs", "numpy"),
         ("doll-joints", "pgs", "fast"),
     ]
+
+
+def test_skips_command_prints_each_skip_with_its_ratio():
+    from puppetcli.bench_skips import SKIPS
+
+    result = CliRunner().invoke(command, ["--skips", "--seconds", "0.02"])
+    assert result.exit_code == 0, result.output
+    rows = [line.split() for line in result.output.splitlines()[3:]]
+    assert [r[0] for r in rows] == list(SKIPS)
+    for r in rows:
+        on, off, ratio = (float(x.replace(",", "")) for x in r[2:5])
+        assert ratio == pytest.approx(on / off, rel=0.01, abs=0.006)
+        assert float(r[5]) <= 1e-5 and float(r[6]) <= 1e-5  # the runs agree
+
+
+def test_doll_stages_cover_the_step():
+    stages = bench.doll_stages(0.005, 0.05)
+    from solver.fast.kernel import STAGES
+
+    assert list(stages)[: len(STAGES)] == list(STAGES)
+    assert all(v >= 0.0 for k, v in stages.items() if k in STAGES)
+    assert stages["solve"] > 0.0 and stages["collision and contact/grip rows"] > 0.0

@@ -1,0 +1,83 @@
+"""Each skip of unneeded work (Options.cull_pairs, Options.dormant_rows, auto's direct
+solve) against the path without it: the same states, within the solver's tolerance."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pytest
+from test_fast import doll_inputs
+
+from puppetcli.rigfile import load_rig
+from solver.fast import fast_step
+from solver.model import build_model
+from solver.state import initial_state
+from solver.step import step
+
+DOLL = Path(__file__).resolve().parents[2] / "rigs" / "doll.yaml"
+
+
+def run(step_fn, model, state, inputs):
+    states, reports = [], []
+    for inp in inputs:
+        state, report = step_fn(model, state, inp)
+        states.append(state)
+        reports.append(report)
+    return states, reports
+
+
+def largest_difference(a, b) -> float:
+    return max(
+        max(np.abs(x.body_pos - y.body_pos).max(), np.abs(x.body_vel - y.body_vel).max())
+        for x, y in zip(a, b, strict=True)
+    )
+
+
+@pytest.mark.parametrize("skip", ["cull_pairs", "dormant_rows"])
+@pytest.mark.parametrize("step_fn", [fast_step, step], ids=["fast", "numpy"])
+def test_skipping_changes_nothing_on_the_doll(skip, step_fn):
+    # The doll with ground contacts, a push and a grip, then a free-mode pointer pressing
+    # the forearm: pairs far apart would find no contact in the narrow phase, and dormant
+    # rows stay at λ = 0 in the unskipped iteration too.
+    steps = 300 if step_fn is fast_step else 60
+    model = build_model(load_rig(DOLL)).with_options(h=0.001)
+    state, inputs = doll_inputs(model, steps)
+    on, rep_on = run(step_fn, model, state, inputs)
+    off, rep_off = run(step_fn, model.with_options(**{skip: False}), state, inputs)
+    assert largest_difference(on, off) <= 1e-12
+    assert [r.contacts for r in rep_on] == [r.contacts for r in rep_off]
+    assert max(r.contacts for r in rep_on) > 0
+
+
+def test_dormant_rows_are_really_left_out_and_checked():
+    # The skip must do something: the doll's speculative foot contacts are dormant, so
+    # with the skip on the hybrid iterates fewer rows (fewer sweeps) for the same result.
+    model = build_model(load_rig(DOLL)).with_options(h=0.001)
+    state = initial_state(model)
+    inputs = [None] * 50
+    _, on = run(fast_step, model, state, inputs)
+    _, off = run(fast_step, model.with_options(dormant_rows=False), state, inputs)
+    assert min(r.contacts for r in on) > 0
+    assert sum(r.iterations for r in on) < sum(r.iterations for r in off)
+
+
+def test_direct_solve_agrees_with_converged_pgs_on_two_sided_rows():
+    # auto solves the doll without ground and limits exactly; the paper's PGS reaches the
+    # same motion only when its sweeps converge (300 sweeps: within 1e-6 m/s over 0.1 s).
+    spec = load_rig(DOLL)
+    bare = replace(
+        spec,
+        ground=None,
+        bones=tuple(replace(b, limits=type(b.limits)(), collide=False) for b in spec.bones),
+    )
+    model = build_model(bare).with_options(h=0.001)
+    state, inputs = doll_inputs(model, 200)
+    inputs = inputs[:100]
+    exact, reports = run(fast_step, model, state, inputs)
+    assert {r.solver for r in reports} == {"direct"}
+    pgs, _ = run(fast_step, model.with_options(method="pgs", iterations=300), state, inputs)
+    assert largest_difference(exact, pgs) < 1e-6
+    pgs15, _ = run(fast_step, model.with_options(method="pgs", iterations=15), state, inputs)
+    assert largest_difference(exact, pgs15) > largest_difference(exact, pgs)
