@@ -14,14 +14,18 @@ Skips (``solver.model.Options``):
   and checks them after the solve (no contact rows where nothing touches);
 - ``direct``: ``auto`` solves a step whose rows are all two-sided exactly (the tree
   elimination) instead of iterating; off = the paper's PGS (15 sweeps), on the doll
-  without ground and limits (``doll-joints``).  Off differs by PGS's own error.
+  without ground and limits (``doll-joints``).  Off differs by PGS's own error;
+- ``sleep``: islands at rest and untouched are frozen (solver.sleep).  The doll first
+  settles for SETTLE seconds (untimed, with sleep on: every island falls asleep), then
+  both runs start from that pose, the one without sleep with every island awake; the
+  grip wakes the upper body, the legs sleep on.
 """
 
 from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -49,12 +53,14 @@ SKIPS = {  # name: (scene, options with the skip on, options with it off)
     "cull_pairs": ("doll", {"cull_pairs": True}, {"cull_pairs": False}),
     "dormant_rows": ("doll", {"dormant_rows": True}, {"dormant_rows": False}),
     "direct": ("doll-joints", {"method": "auto"}, {"method": "pgs"}),
+    "sleep": ("doll", {"sleep": True}, {"sleep": False}),
 }
+SETTLE = 3.0  # s: the sleep skip's untimed start (the legs are asleep after ~2 s)
 
 
-def run(model: Model, inputs: list[StepInput]) -> tuple[float, list[State]]:
-    """Wall seconds of the steps and the State after each."""
-    state, states = initial_state(model), []
+def run(model: Model, inputs: list[StepInput], start: State) -> tuple[float, list[State]]:
+    """Wall seconds of the steps from ``start`` and the State after each."""
+    state, states = start, []
     start = time.perf_counter()
     for inp in inputs:
         state, _ = fast_step(model, state, inp)
@@ -79,16 +85,26 @@ def measure_skip(name: str, h: float, seconds: float, repeats: int) -> SkipRow:
     models = (base.with_options(**on), base.with_options(**off))
     n = max(1, round(seconds / h))
     inputs = grip_inputs(base, seconds, n)
+    starts = _starts(models[0], h) if name == "sleep" else (initial_state(base),) * 2
     best, states = [math.inf, math.inf], [None, None]
-    for m in models:  # untimed: compile, warm caches
-        run(m, inputs[:5])
+    for m, start in zip(models, starts, strict=True):  # untimed: compile, warm caches
+        run(m, inputs[:5], start)
     for _ in range(repeats):
         for k, m in enumerate(models):
-            wall, states[k] = run(m, inputs)
+            wall, states[k] = run(m, inputs, starts[k])
             best[k] = min(best[k], wall)
     pos, rot = differences(states[0], states[1])
     rate_on, rate_off = n / best[0], n / best[1]
     return SkipRow(name, scene, rate_on, rate_off, rate_on / rate_off, pos, rot)
+
+
+def _starts(model: Model, h: float) -> tuple[State, State]:
+    """The doll after SETTLE s left alone (asleep), and the same with every island awake."""
+    state = initial_state(model)
+    for _ in range(round(SETTLE / h)):
+        state, _ = fast_step(model, state)
+    nb = model.nbody
+    return state, replace(state, body_asleep=np.zeros(nb, bool), body_still=np.zeros(nb))
 
 
 def measure_skips(h: float = 0.001, seconds: float = 0.5, repeats: int = 5) -> list[SkipRow]:

@@ -169,16 +169,21 @@ def world_shapes(
     return centre, quat.matrix(q)
 
 
+def shape_bounds(geom: Geometry) -> np.ndarray:
+    """(ns,) m: radius of each shape's bounding sphere about its centre."""
+    return np.where(
+        geom.shape_kind == BOX,
+        np.linalg.norm(geom.shape_half, axis=1),
+        geom.shape_radius + geom.shape_half[:, 1],
+    )
+
+
 def _near(
     geom: Geometry, centre: np.ndarray, rot: np.ndarray, f: np.ndarray, s: np.ndarray, margin: float
 ) -> np.ndarray:
     """Bounding-sphere test (np,) bool: can first f and second s be within margin?"""
     kind = geom.shape_kind
-    bound = np.where(
-        kind == BOX,
-        np.linalg.norm(geom.shape_half, axis=1),
-        geom.shape_radius + geom.shape_half[:, 1],
-    )
+    bound = shape_bounds(geom)
     offset = centre[s] - centre[f]
     gap = np.where(
         kind[f] == PLANE,
@@ -232,17 +237,21 @@ def collide(
     body_quat: np.ndarray,
     margin: float,
     cull: bool = True,
+    active: np.ndarray | None = None,
 ) -> Contacts:
     """Contacts (depth ≥ −margin, m) of the candidate pairs of geom in the pose
     body_pos (nb,3), body_quat (nb,4); see the module docstring for conventions.
     ``cull``: skip the narrow phase of pairs whose bounding spheres are apart by more
-    than the margin (it would find nothing there)."""
+    than the margin (it would find nothing there); ``active`` (npair,) bool: only these
+    pairs (the others' bodies sleep: solver.sleep)."""
     a, b = geom.pair_a, geom.pair_b
     cls = _CLASS[geom.shape_kind]
     swap = cls[a] > cls[b]
     f, s = np.where(swap, b, a), np.where(swap, a, b)
     centre, rot = world_shapes(geom, body_pos, body_quat)
     near = _near(geom, centre, rot, f, s, margin) if cull else np.ones(len(f), dtype=bool)
+    if active is not None:
+        near &= active
     parts = []
     for group in _GROUPS:
         sel = np.flatnonzero(near & (cls[f] == group[0]) & (cls[s] == group[1]))

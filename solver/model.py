@@ -53,7 +53,9 @@ class Options:
     and tested to change nothing): cull_pairs: shape pairs whose bounding spheres are
     farther apart than contact_margin get no narrow phase; dormant_rows: the hybrid
     solve checks one-sided rows that neither pushed last step nor ask to push after the
-    solve instead of iterating them (solver.hybrid).
+    solve instead of iterating them (solver.hybrid); sleep: islands at rest and
+    untouched for sleep_time (s), every body slower than sleep_speed (m/s) and
+    sleep_spin (rad/s), are frozen until touched (solver.sleep).
     """
 
     h: float = 0.005
@@ -75,6 +77,10 @@ class Options:
     max_substeps: int = 64
     cull_pairs: bool = True
     dormant_rows: bool = True
+    sleep: bool = True
+    sleep_speed: float = 5e-4
+    sleep_spin: float = 5e-3
+    sleep_time: float = 0.2
 
 
 @dataclass(frozen=True)

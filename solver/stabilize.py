@@ -25,26 +25,43 @@ from solver.joints import anchor_rows, joint_frames
 from solver.model import Model
 from solver.observe import joint_gaps
 from solver.response import dense_matrix, row_response, world_inverse_inertia
+from solver.rows import Rows
+
+
+def _subset(rows: Rows, keep: np.ndarray) -> Rows:
+    """The anchor rows ``keep`` (no friction rows among them)."""
+    return Rows(**{f: getattr(rows, f)[keep] for f in Rows.__dataclass_fields__})
 
 
 def project_joints(
-    model: Model, pos: np.ndarray, q: np.ndarray, tol: float = 1e-4, rounds: int = 3
+    model: Model,
+    pos: np.ndarray,
+    q: np.ndarray,
+    tol: float = 1e-4,
+    rounds: int = 3,
+    asleep: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Positions and orientations with the joint anchors pulled together."""
+    """Positions and orientations with the joint anchors pulled together; the joints of
+    sleeping bodies (``asleep`` (nb,) bool: solver.sleep) are left as they are."""
     if model.njoint == 0:
         return pos, q
     nb = model.nbody
+    awake = np.ones(model.njoint, dtype=bool) if asleep is None else ~asleep[model.joint_bone]
+    if not awake.any():
+        return pos, q
+    rows3 = np.repeat(awake, 3)
     for _ in range(rounds):
-        if joint_gaps(model, pos, q).max() <= tol:
+        if joint_gaps(model, pos, q)[awake].max() <= tol:
             break
         rot = quat.matrix(q)
         fr = joint_frames(model, pos, q, rot)
         rows = anchor_rows(model.with_options(joint_erp=1.0), fr, 1.0)
+        rows = _subset(rows, rows3)
         resp = row_response(
             rows, model.body_inv_mass, world_inverse_inertia(model.body_inv_inertia, rot), 1.0
         )
         a, _ = dense_matrix(rows, resp, nb)
-        gap = (fr.anchor_child - fr.anchor_parent).reshape(-1)
+        gap = (fr.anchor_child - fr.anchor_parent).reshape(-1)[rows3]
         mu = scipy.linalg.cho_solve(scipy.linalg.cho_factor(a + 1e-14 * np.eye(len(a))), -gap)
         delta = np.zeros((nb + 1, 6))
         np.add.at(delta, rows.body_a, resp[0] * mu[:, None])

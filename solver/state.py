@@ -27,6 +27,8 @@ class State:
     joint_torque_avg (nj,) N·m: low-passed norm of the rheology torque (yield test).
     joint_torque (nj,3) N·m: rheology row forces λ_s of the last step.
     warm_key (n,) int64 sorted, warm_lam (n,): row forces of the last step by row key.
+    body_asleep (nb,) bool: the body's island sleeps (solver.sleep); body_still (nb,) s:
+        how long its island has been at rest.  Empty arrays mean all awake.
     """
 
     time: float
@@ -42,6 +44,8 @@ class State:
     joint_torque: np.ndarray
     warm_key: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     warm_lam: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    body_asleep: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
+    body_still: np.ndarray = field(default_factory=lambda: np.zeros(0))
 
 
 @dataclass(frozen=True)
@@ -99,4 +103,6 @@ def initial_state(model: Model) -> State:
         joint_anchor=np.tile(quat.IDENTITY, (nj, 1)),
         joint_torque_avg=np.zeros(nj),
         joint_torque=np.zeros((nj, 3)),
+        body_asleep=np.zeros(nb, dtype=bool),
+        body_still=np.zeros(nb),
     )

@@ -41,6 +41,7 @@ from solver.pgs import pgs_solve
 from solver.reference import reference_solve
 from solver.response import dense_system, regularize, row_response, world_inverse_inertia
 from solver.rows import KEY_SHIFT, KIND_CONTACT, KIND_FRICTION, KIND_RHEOLOGY, Rows, concat
+from solver.sleep import body_islands, settle, touch
 from solver.stabilize import project_joints
 from solver.state import State, StepInput, StepReport
 from solver.substep import run_substeps, substeps_needed
@@ -53,8 +54,10 @@ def build_rows(
     body_rot: np.ndarray,
     vel_free: np.ndarray,
     inp: StepInput | None = None,
+    asleep: np.ndarray | None = None,
 ) -> tuple[Rows, int, np.ndarray]:
-    """The step's row table, its contact count, and the joint of each rheology row."""
+    """The step's row table, its contact count, and the joint of each rheology row;
+    ``asleep`` (nb,) bool: bodies whose island sleeps get no rows (solver.sleep)."""
     inp = inp or StepInput()
     h = model.options.h
     fr = joint_frames(model, state.body_pos, state.body_quat, body_rot)
@@ -69,13 +72,41 @@ def build_rows(
     if model.has_collision:
         con = collide.collide(
             model.geometry, state.body_pos, state.body_quat, model.options.contact_margin,
-            cull=model.options.cull_pairs,
+            cull=model.options.cull_pairs, active=_awake_pairs(model, asleep),
         )  # fmt: skip
         ncontact = len(con.key)
         if ncontact:
             blocks.append(contact_rows(model, con, state.body_pos, vel_free))
     blocks.extend(_pointer_rows(model, state, inp, vel_free))
-    return concat(blocks), ncontact, rheo_joint
+    rows = concat(blocks)
+    if asleep is None or not asleep.any():
+        return rows, ncontact, rheo_joint
+    keep = _awake_rows(model, rows, asleep)
+    rheo_joint = rheo_joint[keep[rows.kind == KIND_RHEOLOGY]]
+    return _select(rows, keep), ncontact, rheo_joint
+
+
+def _awake_pairs(model: Model, asleep: np.ndarray | None) -> np.ndarray | None:
+    """(npair,) bool: shape pairs with a body that moves and is awake (None: all)."""
+    if asleep is None or not asleep.any():
+        return None
+    g = model.geometry
+    awake = np.append((model.body_inv_mass > 0.0) & ~asleep, False)  # index −1: static
+    return awake[g.shape_body[g.pair_a]] | awake[g.shape_body[g.pair_b]]
+
+
+def _awake_rows(model: Model, rows: Rows, asleep: np.ndarray) -> np.ndarray:
+    """(n,) bool: rows with a movable side that is awake."""
+    awake = np.append((model.body_inv_mass > 0.0) & ~asleep, False)
+    return awake[rows.body_a] | awake[rows.body_b]
+
+
+def _select(rows: Rows, keep: np.ndarray) -> Rows:
+    """The rows ``keep`` (friction rows' normal indices renumbered)."""
+    new_index = np.cumsum(keep) - 1
+    fric = np.where(rows.fric_of >= 0, new_index[np.maximum(rows.fric_of, 0)], -1)
+    fields = {f: getattr(rows, f)[keep] for f in Rows.__dataclass_fields__ if f != "fric_of"}
+    return Rows(fric_of=fric[keep], **fields)
 
 
 def _pointer_rows(model: Model, state: State, inp: StepInput, vel_free: np.ndarray) -> list[Rows]:
@@ -167,9 +198,11 @@ def _step_once(
     model: Model, state: State, inp: StepInput, body_rot: np.ndarray
 ) -> tuple[State, StepReport]:
     h = model.options.h
+    asleep, still, fresh = wake(model, state, inp)
     inv_i = world_inverse_inertia(model.body_inv_inertia, body_rot)
     vel_free = free_velocity(model, state, inp, inv_i)
-    rows, ncontact, rheo_joint = build_rows(model, state, body_rot, vel_free, inp)
+    vel_free[asleep] = 0.0
+    rows, ncontact, rheo_joint = build_rows(model, state, body_rot, vel_free, inp, asleep)
     resp = row_response(rows, model.body_inv_mass, inv_i, h)
     rows = regularize(rows, resp, model.options.regularization)
     try:
@@ -178,9 +211,20 @@ def _step_once(
         raise SimulationError(str(exc), state.step, state.time, None) from None
     check_state(model, state.step, state.time, state.body_pos, state.body_quat, vel)
     pos, q, omega = integrate_pose(model, state, vel, body_rot)
-    pos, q = project_joints(model, pos, q)
+    pos[asleep], q[asleep], omega[asleep] = state.body_pos[asleep], state.body_quat[asleep], 0.0
+    pos, q = project_joints(model, pos, q, asleep=asleep)
     check_state(model, state.step, state.time, pos, q, np.concatenate((vel[:, :3], omega), 1))
     rheo = _rheology_update(model, state, rows, vel, lam, rheo_joint, q)
+    frozen = asleep[model.joint_bone]  # their torque reads 0: no rows
+    for name in ("joint_q_sf", "joint_yielded", "joint_anchor", "joint_torque_avg"):
+        rheo[name][frozen] = getattr(state, name)[frozen]
+    lin = vel[:, :3].copy()
+    if model.options.sleep:
+        settle(
+            body_islands(model), asleep, still, lin, omega, model.joint_bone,
+            flowing(model, rheo["joint_yielded"]) & model.joint_rheology, h,
+            model.options.sleep_speed, model.options.sleep_spin, model.options.sleep_time, fresh,
+        )  # fmt: skip
     order = np.argsort(rows.key, kind="stable")
     new = replace(
         state,
@@ -188,10 +232,12 @@ def _step_once(
         step=state.step + 1,
         body_pos=pos,
         body_quat=q,
-        body_vel=vel[:, :3].copy(),
+        body_vel=lin,
         body_omega=omega,
         warm_key=rows.key[order],
         warm_lam=lam[order],
+        body_asleep=asleep,
+        body_still=still,
         **rheo,
     )
     grip_force, grip_torque = coupling_wrench(rows, lam)
@@ -199,6 +245,35 @@ def _step_once(
         len(rows), ncontact, iters, float(residual), used, grip_force, grip_torque,
         touch_force(rows, lam),
     )  # fmt: skip
+
+
+def wake(model: Model, state: State, inp: StepInput) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(asleep, still, touched) (nb,) after waking the islands this step's input or a
+    moving neighbour touches (solver.sleep.touch); all awake when sleeping is off."""
+    nb, opt = model.nbody, model.options
+    asleep, still = np.zeros(nb, dtype=bool), np.zeros(nb)
+    fresh = np.zeros(nb, dtype=bool)
+    if not opt.sleep:
+        return asleep, still, fresh
+    if len(state.body_asleep) == nb:
+        asleep, still = state.body_asleep.copy(), state.body_still.copy()
+    loaded = np.zeros(nb, dtype=bool)
+    for load in (inp.body_force, inp.body_torque):
+        if load is not None:
+            loaded |= np.any(np.asarray(load) != 0.0, axis=1)
+    ptr, cpl = inp.pointer, inp.coupling
+    grip_body = cpl.body if (ptr is not None and cpl is not None) else -1
+    pointer = np.zeros(4)
+    if ptr is not None and cpl is None and ptr.radius > 0.0:
+        pointer[:3], pointer[3] = ptr.pos - opt.h * ptr.vel, ptr.radius
+    g = model.geometry
+    centre, _ = collide.world_shapes(g, state.body_pos, state.body_quat)
+    touch(
+        body_islands(model), asleep, still, fresh, loaded, grip_body, pointer, centre,
+        collide.shape_bounds(g), g.shape_body, g.pair_a, g.pair_b, opt.contact_margin,
+        state.body_vel, state.body_omega, opt.sleep_speed, opt.sleep_spin,
+    )  # fmt: skip
+    return asleep, still, fresh
 
 
 def touch_force(rows: Rows, lam: np.ndarray) -> np.ndarray:

@@ -41,3 +41,19 @@ def seconds_per_cycle(interval: float = 0.05) -> float:
         pass
     c1, t1 = cycles(), time.perf_counter()
     return (t1 - t0) / (c1 - c0) if c1 > c0 else 0.0
+
+
+@njit(cache=True)
+def _reads(n):
+    total = 0
+    for _ in range(n):
+        total += cycles() & 1
+    return total
+
+
+def counter_read_seconds(reads: int = 20000) -> float:
+    """Seconds one ``cycles()`` costs, timed over a compiled loop of ``reads`` reads."""
+    _reads(10)
+    start = time.perf_counter()
+    _reads(reads)
+    return (time.perf_counter() - start) / reads

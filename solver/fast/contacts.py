@@ -65,16 +65,19 @@ def world_shapes(g, body_pos, body_quat, centre, rot):
 
 
 @njit(cache=True, error_model="numpy")
-def collide_scene(g, centre, rot, margin, cb, cull):
+def collide_scene(g, centre, rot, margin, cb, cull, awake):
     """Contacts of the scene's candidate pairs into cb; returns the count, or −1 when a
     box–box pair is within reach (not compiled: the caller falls back to numpy).  With
     ``cull``, pairs whose bounding spheres are farther apart than the margin are skipped
-    before the narrow phase (which would find nothing there either)."""
+    before the narrow phase (which would find nothing there either); pairs with no
+    awake movable body (awake (nb,) bool: solver.sleep) are skipped altogether."""
     kind, radius, half, bound = g[3], g[4], g[5], g[6]
     pair_f, pair_s, group, sign, body_a, body_b, mu = g[7], g[8], g[9], g[10], g[11], g[12], g[13]
     n = 0
     for p in range(len(pair_f)):
         f, s = pair_f[p], pair_s[p]
+        if not ((body_a[p] >= 0 and awake[body_a[p]]) or (body_b[p] >= 0 and awake[body_b[p]])):
+            continue
         offset = sub(vec(centre, s), vec(centre, f))
         plane = kind[f] == PLANE
         gap = dot(offset, column(rot, f, 1)) if plane else norm(offset) - bound[f]

@@ -147,11 +147,13 @@ def _iterate(rw, its, nu, s_vec, lam0, iterations):
 
 
 @njit(cache=True, error_model="numpy")
-def _round(m, tree, ws, opt, rw, n, lam, vel_p, its, nu, free_grip, ngrip, body, lam0, iters):
-    """One solve with the current sets: (ok, v, sweeps, residual); fills λ."""
+def _round(m, tree, ws, opt, rw, n, lam, vel_p, its, nu, grips, lam0, iters, asleep):
+    """One solve with the current sets: (ok, v, sweeps, residual); fills λ.
+    grips = (free grip rows, their count, the gripped body)."""
     _, parent, _, _, seq, rows, size, tw = tree
     nb, movable = len(vel_p), m[16]
-    nseq = forest_sequence(tree, nb, movable, free_grip, ngrip, body)
+    free_grip, ngrip, body = grips
+    nseq = forest_sequence(tree, nb, movable, free_grip, ngrip, body, asleep, m[1])
     init_nodes(seq, nseq, nb, rw, vel_p, opt[0], m[15], ws[7], rows, size, tw[0], tw[2])
     vel = np.empty_like(vel_p)
     if not tree_factor(seq, nseq, parent, nb, rw, rows, size, tw):
@@ -177,9 +179,10 @@ def _round(m, tree, ws, opt, rw, n, lam, vel_p, its, nu, free_grip, ngrip, body,
 
 
 @njit(cache=True, error_model="numpy")
-def hybrid_solve(m, tree, ws, opt, rw, n, ne, vel_free, lam0, iterations, grip, skip):
+def hybrid_solve(m, tree, ws, opt, rw, n, ne, vel_free, lam0, iterations, grip, skip, asleep):
     """(ok, λ, v, sweeps, residual) as solver.hybrid.hybrid_solve; ok False when the
-    exact system is degenerate; ``skip``: leave dormant rows out of the iteration."""
+    exact system is degenerate; ``skip``: leave dormant rows out of the iteration;
+    asleep (nb,) bool: sleeping bodies (their islands are not in the forest)."""
     grip0, ngrip, body = grip
     dormant = dormant_rows(rw, n, lam0) if skip else np.zeros(n, dtype=np.bool_)
     at_lo, at_hi = np.zeros(n, dtype=np.bool_), np.zeros(n, dtype=np.bool_)
@@ -198,8 +201,8 @@ def hybrid_solve(m, tree, ws, opt, rw, n, ne, vel_free, lam0, iterations, grip, 
         vel_p = vel_free.copy()
         apply_rows(rw, at_lo | at_hi, ws[1], ws[2], lam, vel_p)
         ok, vel, sweeps, residual = _round(
-            m, tree, ws, opt, rw, n, lam, vel_p, its, nu, free_grip, nfree, body, lam0,
-            iterations,
+            m, tree, ws, opt, rw, n, lam, vel_p, its, nu, (free_grip, nfree, body), lam0,
+            iterations, asleep,
         )  # fmt: skip
         if not ok:
             return False, lam, vel, 0, 0.0

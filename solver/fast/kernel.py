@@ -44,10 +44,11 @@ from solver.fast.post import (
     rheology_update,
     state_ok,
 )
-from solver.fast.rows import ZERO, anchor_rows, limit_rows, rheology_rows
+from solver.fast.rows import ZERO, anchor_rows, flowing, is_null, limit_rows, rheology_rows
 from solver.fast.tree import forest_sequence, row_velocity, tree_solve
 from solver.pgs import pgs_solve
 from solver.rows import KIND_GRIP, KIND_RHEOLOGY
+from solver.sleep import settle, touch
 from solver.substep import substeps_needed
 
 OK, FALLBACK, SUBSTEP = 0, 1, 2
@@ -97,26 +98,26 @@ def free_velocity(m, opt, st, inv_i, inp, out):
 
 
 @njit(cache=True, error_model="numpy")
-def build_rows(m, g, opt, iopt, st, rot, vel_free, inp, ws):
+def build_rows(m, g, opt, iopt, st, rot, vel_free, inp, ws, asleep, awake):
     """Fill the row table; returns (rows, scene contacts, first grip row, grip rows), or
-    rows = −1 when a box–box pair is within reach."""
+    rows = −1 when a box–box pair is within reach.  The shapes' world frames (ws[8],
+    ws[9]) are already computed; asleep/awake (nb,) bool: sleeping bodies and the awake
+    movable ones (solver.sleep)."""
     pos, quat = st[0], st[1]
     rw, rheo_joint, cb, centre, srot = ws[0], ws[3], ws[4], ws[8], ws[9]
     pvec, cvec, ivec = inp[2], inp[3], inp[4]
     h = opt[0]
     prof, on = ws[10], iopt[7]
     t = cycles() if on else 0
-    n = anchor_rows(m, pos, rot, st[3], h, opt[1], True, rw, 0)
+    n = anchor_rows(m, pos, rot, st[3], h, opt[1], True, asleep, rw, 0)
     if iopt[3]:
-        n = rheology_rows(m, quat, rot, h, st[4], st[5], st[6], rheo_joint, rw, n)
+        n = rheology_rows(m, quat, rot, h, st[4], st[5], st[6], asleep, rheo_joint, rw, n)
     if iopt[4]:
-        n = limit_rows(m, quat, rot, h, opt[1], opt[5], rw, n)
+        n = limit_rows(m, quat, rot, h, opt[1], opt[5], asleep, rw, n)
     tick(prof, on, 2, t)
     ncontact = 0
-    if iopt[5] or ivec[0] == MODE_TOUCH:
-        world_shapes(g, pos, quat, centre, srot)
     if iopt[5]:
-        ncontact = collide_scene(g, centre, srot, opt[4], cb, iopt[8])
+        ncontact = collide_scene(g, centre, srot, opt[4], cb, iopt[8], awake)
         if ncontact < 0:
             return -1, 0, 0, 0
         n = contact_rows(cb, 0, ncontact, pos, vel_free, ZERO, h, opt[2], opt[3], rw, n)
@@ -177,19 +178,19 @@ def warm_start(opt, iopt, st, rw, n):
 
 
 @njit(cache=True, error_model="numpy")
-def _tree_pass(m, tree, ws, opt, rw, vel_free, free_grip, ngrip, body, lam):
+def _tree_pass(m, tree, ws, opt, rw, vel_free, free_grip, ngrip, body, asleep, lam):
     """λ of the joint rows and the free grip rows by the tree elimination (pinned rows'
     forces are already in vel_free); False when the system is degenerate."""
     _, parent, _, _, seq, rows, size, tw = tree
     nb = len(vel_free)
-    nseq = forest_sequence(tree, nb, m[16], free_grip, ngrip, body)
+    nseq = forest_sequence(tree, nb, m[16], free_grip, ngrip, body, asleep, m[1])
     return tree_solve(
         seq, nseq, parent, nb, rw, vel_free, opt[0], m[15], ws[7], rows, size, tw, lam
     )
 
 
 @njit(cache=True, error_model="numpy")
-def direct(m, tree, ws, opt, rw, n, vel_free, grip):
+def direct(m, tree, ws, opt, rw, n, vel_free, grip, asleep):
     """(code, λ, v, residual) as solver.direct.direct_solve: a primal active set on the
     box-QP.  Rows pinned at a bound (at_lo/at_hi) have their force folded into v_free and
     the free rows are solved by the tree; a pinned row is released when its residual
@@ -211,7 +212,7 @@ def direct(m, tree, ws, opt, rw, n, vel_free, grip):
                 free_grip[nfree], nfree = i, nfree + 1
         vel = vel_free.copy()
         apply_rows(rw, at_lo | at_hi, ws[1], ws[2], lam, vel)
-        if not _tree_pass(m, tree, ws, opt, rw, vel, free_grip, nfree, body, lam):
+        if not _tree_pass(m, tree, ws, opt, rw, vel, free_grip, nfree, body, asleep, lam):
             return 2, lam, vel, 0.0
         vel = vel_free.copy()
         apply(rw, n, ws[1], ws[2], lam, vel)
@@ -234,7 +235,7 @@ def direct(m, tree, ws, opt, rw, n, vel_free, grip):
 
 
 @njit(cache=True, error_model="numpy")
-def solve(m, tree, ws, opt, iopt, st, n, vel_free, grip):
+def solve(m, tree, ws, opt, iopt, st, n, vel_free, grip, asleep):
     """(status, λ, v, iterations, residual, solver) as solver.step.solve."""
     rw = ws[0]
     bilateral = True
@@ -246,7 +247,7 @@ def solve(m, tree, ws, opt, iopt, st, n, vel_free, grip):
     if method == METHOD_DIRECT or (method == METHOD_AUTO and bilateral):
         if not bilateral:
             return FALLBACK, lam0, vel_free, 0, 0.0, SOLVER_DIRECT
-        code, lam, vel, residual = direct(m, tree, ws, opt, rw, n, vel_free, grip)
+        code, lam, vel, residual = direct(m, tree, ws, opt, rw, n, vel_free, grip, asleep)
         if code == 2:
             return FALLBACK, lam, vel, 0, 0.0, SOLVER_DIRECT
         if code == 0:
@@ -257,7 +258,7 @@ def solve(m, tree, ws, opt, iopt, st, n, vel_free, grip):
         while ne < n and rw[11][ne] <= KIND_RHEOLOGY:
             ne += 1
         ok, lam, vel, sweeps, residual = hybrid_solve(
-            m, tree, ws, opt, rw, n, ne, vel_free, lam0, iopt[1], grip, iopt[9]
+            m, tree, ws, opt, rw, n, ne, vel_free, lam0, iopt[1], grip, iopt[9], asleep
         )
         if not ok:
             return FALLBACK, lam, vel, 0, 0.0, SOLVER_HYBRID
@@ -296,24 +297,22 @@ def report(rw, n, lam, rep_f):
 
 
 @njit(cache=True, error_model="numpy")
-def step_kernel(m, g, tree, ptree, ws, pws, opt, iopt, st, inp):
-    """One step.  Returns (status, (x, q, v, ω, q_sf, yielded, anchor, τ_avg, τ), warm keys,
-    warm λ, (rows, contacts, iterations, solver), (residual, grip f, grip τ, touch f))."""
+def step_kernel(m, g, tree, ptree, ws, pws, opt, iopt, st, inp, out, rep_i, rep_f):
+    """One step of st into the caller's arrays (entry points: ``solver.fast.entry``).
+
+    st (x, q, v, ω, q_sf, yielded, anchor, τ_avg, warm keys, warm λ, asleep, still);
+    out (x, q, v, ω, q_sf, yielded, anchor, τ_avg, τ, asleep, still) is written and must not
+    share memory with st (read throughout, intact when the step is handed back); rep_i (4,) (rows,
+    contacts, iterations, solver) and rep_f (10,) (residual, grip f, grip τ, touch f) are
+    zeroed, then filled.  Returns (status, out, warm keys, warm λ, rep_i, rep_f); the warm
+    keys and λ must be fresh arrays (fast_step keeps them in the State, and the model's
+    arrays are views that must not reach Python: solver.fast.flat)."""
     pos, quat = st[0], st[1]
-    nb, nj = len(pos), len(m[0])
+    nb = len(pos)
     rw, rot, inv_i, inertia_w = ws[0], ws[5], ws[6], ws[7]
-    out = (
-        np.empty((nb, 3)),
-        np.empty((nb, 4)),
-        np.empty((nb, 3)),
-        np.empty((nb, 3)),
-        np.empty((nj, 3)),
-        np.zeros(nj, dtype=np.bool_),
-        np.empty((nj, 4)),
-        np.empty(nj),
-        np.empty((nj, 3)),
-    )
-    rep_i, rep_f = np.zeros(4, dtype=np.int64), np.zeros(10)
+    out[5][:] = False
+    rep_i[:] = 0
+    rep_f[:] = 0
     none_k, none_l = np.empty(0, dtype=np.int64), np.empty(0)
     prof, on = ws[10], iopt[7]
     t = cycles() if on else 0
@@ -327,12 +326,24 @@ def step_kernel(m, g, tree, ptree, ws, pws, opt, iopt, st, inp):
     if nsub > 1:
         rep_i[0] = nsub
         return SUBSTEP, out, none_k, none_l, rep_i, rep_f
+    if iopt[5] or inp[4][0] == MODE_TOUCH or iopt[10]:
+        world_shapes(g, pos, quat, ws[8], ws[9])
+    asleep, fresh = out[9], np.zeros(nb, dtype=np.bool_)
+    wake(m, g, opt, iopt, st, inp, ws[8], out[9], out[10], fresh)
+    awake = np.empty(nb, dtype=np.bool_)
+    for b in range(nb):
+        awake[b] = m[16][b] > 0.0 and not asleep[b]
     t = tick(prof, on, 0, t)
     vel_free = np.empty((nb, 6))
     free_velocity(m, opt, st, inv_i, inp, vel_free)
+    for b in range(nb):
+        if asleep[b]:
+            vel_free[b, :] = 0.0
     t = tick(prof, on, 1, t)
     joint_part = prof[2]
-    n, ncontact, grip0, ngrip = build_rows(m, g, opt, iopt, st, rot, vel_free, inp, ws)
+    n, ncontact, grip0, ngrip = build_rows(
+        m, g, opt, iopt, st, rot, vel_free, inp, ws, asleep, awake
+    )
     if n < 0:
         return FALLBACK, out, none_k, none_l, rep_i, rep_f
     t = tick(prof, on, 3, t + (prof[2] - joint_part))  # build_rows timed its joint rows (2)
@@ -340,52 +351,67 @@ def step_kernel(m, g, tree, ptree, ws, pws, opt, iopt, st, inp):
     regularize(rw, n, ws[1], ws[2], opt[6])
     t = tick(prof, on, 4, t)
     grip = (grip0, ngrip, inp[4][1])
-    status, lam, vel, iters, residual, used = solve(m, tree, ws, opt, iopt, st, n, vel_free, grip)
+    status, lam, vel, iters, residual, used = solve(
+        m, tree, ws, opt, iopt, st, n, vel_free, grip, asleep
+    )
     t = tick(prof, on, 5, t)
     if status or not state_ok(m, opt, pos, quat, vel[:, :3], vel[:, 3:]):
         return FALLBACK, out, none_k, none_l, rep_i, rep_f
-    integrate(m, opt[0], pos, quat, vel, rot, out[0], out[1], out[3])
-    if not project(m, ptree, pws, out[0], out[1]):
+    integrate(m, opt[0], pos, quat, vel, rot, asleep, out[0], out[1], out[3])
+    if not project(m, ptree, pws, out[0], out[1], asleep):
         return FALLBACK, out, none_k, none_l, rep_i, rep_f
     if not state_ok(m, opt, out[0], out[1], vel[:, :3], out[3]):
         return FALLBACK, out, none_k, none_l, rep_i, rep_f
     out[2][:, :] = vel[:, :3]
     t = tick(prof, on, 6, t)
-    rheology_update(m, opt, st, rw, n, lam, vel, ws[3], out[1], out[4:])
-    keys = rw[10][:n]
+    rheology_update(m, opt, st, rw, n, lam, vel, ws[3], out[1], asleep, out[4:9])
+    if iopt[10]:
+        settle(m[19], asleep, out[10], out[2], out[3], m[1], flowing_joints(m, out[5]), opt[0],
+               opt[15], opt[16], opt[17], fresh)  # fmt: skip
+    live = np.empty(n, dtype=np.int64)  # the rows that are not empty slots (solver.sleep)
+    nlive = 0
+    for i in range(n):
+        if not is_null(rw, i):
+            live[nlive], nlive = i, nlive + 1
+    keys = rw[10][live[:nlive]]
     order = np.argsort(keys, kind="mergesort")
-    rep_i[0], rep_i[1], rep_i[2], rep_i[3] = n, ncontact, iters, used
+    rep_i[0], rep_i[1], rep_i[2], rep_i[3] = nlive, ncontact, iters, used
     rep_f[0] = residual
     report(rw, n, lam, rep_f)
     tick(prof, on, 7, t)
-    return OK, out, keys[order], lam[order], rep_i, rep_f
+    return OK, out, keys[order], lam[live[:nlive]][order], rep_i, rep_f
 
 
 @njit(cache=True, error_model="numpy")
-def inplace_kernel(m, g, tree, ptree, ws, pws, opt, iopt, buf, warm, inp, rep_i, rep_f):
-    """``step_kernel`` on state arrays updated in place (solver.fast.sim.Sim).
+def wake(m, g, opt, iopt, st, inp, centre, asleep, still, fresh):
+    """asleep, still (nb,) ← the state's, then wake what this step touches (solver.sleep:
+    loads, the grip, a free pointer, moving neighbours); all awake when sleeping is off."""
+    nb = len(asleep)
+    for b in range(nb):
+        asleep[b], still[b] = (st[10][b], st[11][b]) if iopt[10] else (False, 0.0)
+    if not iopt[10]:
+        return
+    force, torque, pvec, ivec = inp[0], inp[1], inp[2], inp[4]
+    loaded = np.zeros(nb, dtype=np.bool_)
+    for b in range(nb):
+        for k in range(3):
+            if (ivec[3] and force[b, k] != 0.0) or (ivec[4] and torque[b, k] != 0.0):
+                loaded[b] = True
+    pointer = np.zeros(4)
+    if ivec[0] == MODE_TOUCH:
+        for k in range(3):
+            pointer[k] = pvec[k] - opt[0] * pvec[7 + k]
+        pointer[3] = pvec[13]
+    grip_body = ivec[1] if ivec[0] == MODE_GRIP else -1
+    touch(m[19], asleep, still, fresh, loaded, grip_body, pointer, centre, g[6], g[0], g[7],
+          g[8], opt[4], st[2], st[3], opt[15], opt[16])  # fmt: skip
 
-    buf: (x, q, v, ω, q_sf, yielded, anchor, τ_avg, τ); warm: (keys, λ, count (1,)) with
-    room for every row; rep_i (4,), rep_f (10,) receive the report.  Returns (status,
-    substeps asked for); on a status other than OK nothing was written."""
-    nw = warm[2][0]
-    st = (buf[0], buf[1], buf[2], buf[3], buf[4], buf[5], buf[6], buf[7], warm[0][:nw],
-          warm[1][:nw])  # fmt: skip
-    status, out, keys, lam, ri, rf = step_kernel(m, g, tree, ptree, ws, pws, opt, iopt, st, inp)
-    if status:
-        return status, ri[0]
-    buf[0][:, :] = out[0]
-    buf[1][:, :] = out[1]
-    buf[2][:, :] = out[2]
-    buf[3][:, :] = out[3]
-    buf[4][:, :] = out[4]
-    buf[5][:] = out[5]
-    buf[6][:, :] = out[6]
-    buf[7][:] = out[7]
-    buf[8][:, :] = out[8]
-    for i in range(len(keys)):
-        warm[0][i], warm[1][i] = keys[i], lam[i]
-    warm[2][0] = len(keys)
-    rep_i[:] = ri
-    rep_f[:] = rf
-    return OK, 0
+
+@njit(cache=True, error_model="numpy")
+def flowing_joints(m, yielded):
+    """(nj,) bool: joints with rheology on the three-element rows (solver.joints.flowing)."""
+    nj = len(m[0])
+    out = np.zeros(nj, dtype=np.bool_)
+    for j in range(nj):
+        out[j] = m[7][j] and flowing(m[13], m[14], yielded, j)
+    return out

@@ -7,11 +7,16 @@ sized for the worst case (6 rows per joint, 3 limit rows per joint, 3 rows per
 possible contact, and the grip's 6).  The workspaces make a FastModel usable by one
 thread at a time.
 
+Every array of those tuples is a view into three buffers, ``flat`` (solver.fast.flat):
+the compiled step is passed the buffers and rebuilds the tuples itself, which saves
+unboxing ~100 arrays per call; writes through the views (``fm.iopt[7] = 1``) are seen by
+the step.
+
 Tuple layouts:
   m    0 joint_parent 1 joint_bone 2 anchor_parent 3 anchor_child 4 kf 5 df 6 dd
        7 joint_rheology 8 joint_axis 9 swing 10 twist_lo 11 twist_hi 12 yield
        13 plastic (all D_d finite) 14 finite yield 15 body_mass 16 body_inv_mass
-       17 body_inertia 18 body_inv_inertia
+       17 body_inertia 18 body_inv_inertia 19 body island (solver.sleep)
   g    0 shape_body 1 shape_pos 2 shape_quat 3 kind 4 radius 5 half 6 bound 7 pair first
        8 pair second 9 group 10 normal sign 11 body_a 12 body_b 13 friction
        14 pointer-touchable shapes 15 their friction with the pointer
@@ -21,21 +26,24 @@ Tuple layouts:
        7 I_w 8 shape centres 9 shape rotations 10 cycles per stage (solver.fast.kernel)
   opt  h, joint_erp, contact_erp, contact_slop, contact_margin, limit_margin,
        regularization, yield_filter_time, max_speed, max_angular_speed, max_joint_gap,
-       warm_start_factor, gravity (3)
+       warm_start_factor, gravity (3), sleep speed, sleep spin, sleep time
   iopt method (0 auto, 1 pgs, 2 direct, 3 hybrid), iterations, warm_start, has rheology,
-       has limits, has collision, max substeps, profiling on, cull pairs, dormant rows
+       has limits, has collision, max substeps, profiling on, cull pairs, dormant rows,
+       sleep
 """
 
 from __future__ import annotations
 
 import weakref
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from solver.fast.flat import flatten
 from solver.fast.kernel import STAGES
 from solver.model import Model
+from solver.sleep import body_islands
 
 METHODS = {"auto": 0, "pgs": 1, "direct": 2, "hybrid": 3}
 FEATURES = (2, 8, 3, 3, 16)  # most contacts per pair of each group
@@ -46,7 +54,11 @@ _CLASS = np.array([0, 1, 1, 2])
 
 @dataclass
 class FastModel:
-    """Packed arrays and workspaces of one Model; ``reason`` is why it is unsupported."""
+    """Packed arrays and workspaces of one Model; ``reason`` is why it is unsupported.
+
+    m … iopt: views into ``flat`` (module docstring); zeros (nb,3): the force and torque
+    of a step without loads; pvec (14,), ivec (5,), rep_i (4,): the step's pointer and
+    flag inputs and integer report, rewritten by every step (solver.fast)."""
 
     m: tuple
     g: tuple
@@ -56,8 +68,13 @@ class FastModel:
     pws: tuple
     opt: np.ndarray
     iopt: np.ndarray
+    flat: tuple
     zeros: np.ndarray
     reason: str | None
+    pvec: np.ndarray = field(default_factory=lambda: np.zeros(14))
+    ivec: np.ndarray = field(default_factory=lambda: np.zeros(5, np.int64))
+    rep_i: np.ndarray = field(default_factory=lambda: np.zeros(4, np.int64))
+    flags: tuple = (0, 0, False, False, False)  # what ivec holds
     last: tuple = (None, None)  # (State fast_step returned last, its kernel arrays)
     coupling: tuple = (None, None)  # (Coupling packed last, its packed array)
 
@@ -103,6 +120,7 @@ def pack(model: Model) -> FastModel:
         _c(model.body_inv_mass),
         _c(model.body_inertia),
         _c(model.body_inv_inertia),
+        _c(body_islands(model), np.int64),
     )
     g, ncontact, reason = _geometry(model)
     tree, ptree = _forest(model)
@@ -122,6 +140,9 @@ def pack(model: Model) -> FastModel:
             o.max_joint_gap,
             o.warm_start_factor,
             *o.gravity,
+            o.sleep_speed,
+            o.sleep_spin,
+            o.sleep_time,
         ]
     )
     iopt = _c(
@@ -136,6 +157,7 @@ def pack(model: Model) -> FastModel:
             0,
             o.cull_pairs,
             o.dormant_rows,
+            o.sleep,
         ],
         np.int64,
     )
@@ -165,7 +187,8 @@ def pack(model: Model) -> FastModel:
         np.zeros((nb, 3, 3)),
         np.zeros(3 * nj),
     )
-    return FastModel(m, g, tree, ptree, ws, pws, opt, iopt, np.zeros((nb, 3)), reason)
+    flat, views = flatten((m, g, tree, ptree, ws, pws, opt, iopt))
+    return FastModel(*views, flat, np.zeros((nb, 3)), reason)
 
 
 def _rows(n: int) -> tuple:

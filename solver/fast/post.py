@@ -61,11 +61,18 @@ def _omega_from_momentum(q, mom, inv_inertia, b, rot):
 
 
 @njit(cache=True, error_model="numpy")
-def integrate(m, h, pos, quat, vel, rot, out_pos, out_quat, out_omega):
+def integrate(m, h, pos, quat, vel, rot, asleep, out_pos, out_quat, out_omega):
     """Semi-implicit Euler in momentum form with the implicit midpoint rotation rate.
-    rot (nb,3,3) holds R(q[t]) on entry and R(q[t+1]) on return."""
+    rot (nb,3,3) holds R(q[t]) on entry and R(q[t+1]) on return.  Sleeping bodies
+    (asleep (nb,) bool) keep their pose, at rest."""
     inertia, inv_inertia = m[17], m[18]
     for b in range(len(pos)):
+        if asleep[b]:
+            for k in range(3):
+                out_pos[b, k], out_omega[b, k] = pos[b, k], 0.0
+            for k in range(4):
+                out_quat[b, k] = quat[b, k]
+            continue
         put(out_pos, b, add(vec(pos, b), scale(h, (vel[b, 0], vel[b, 1], vel[b, 2]))))
         rate = (vel[b, 3], vel[b, 4], vel[b, 5])
         mom = matvec(rot, b, matvec(inertia, b, tmatvec(rot, b, rate)))  # L = R I Rᵀ ω
@@ -82,16 +89,31 @@ def integrate(m, h, pos, quat, vel, rot, out_pos, out_quat, out_omega):
 @njit(cache=True, error_model="numpy")
 def joint_gaps(m, pos, quat):
     """(largest anchor distance (m), its joint) at the pose."""
-    parent, bone, anc_p, anc_c = m[0], m[1], m[2], m[3]
     worst, at = 0.0, 0
-    for j in range(len(parent)):
-        p, c = parent[j], bone[j]
-        a = add(vec(pos, p), qrotate(quat_at(quat, p), vec(anc_p, j))) if p >= 0 else vec(anc_p, j)
-        b = add(vec(pos, c), qrotate(quat_at(quat, c), vec(anc_c, j)))
-        gap = norm(sub(b, a))
+    for j in range(len(m[0])):
+        gap = _gap(m, pos, quat, j)
         if gap > worst or j == 0:
             worst, at = gap, j
     return worst, at
+
+
+@njit(cache=True, error_model="numpy")
+def _gap(m, pos, quat, j):
+    """Joint j's anchor distance (m)."""
+    p, c, anc_p, anc_c = m[0][j], m[1][j], m[2], m[3]
+    a = add(vec(pos, p), qrotate(quat_at(quat, p), vec(anc_p, j))) if p >= 0 else vec(anc_p, j)
+    b = add(vec(pos, c), qrotate(quat_at(quat, c), vec(anc_c, j)))
+    return norm(sub(b, a))
+
+
+@njit(cache=True, error_model="numpy")
+def _awake_gap(m, pos, quat, asleep):
+    """Largest anchor distance (m) of the joints of awake bodies (0 when none)."""
+    worst = 0.0
+    for j in range(len(m[0])):
+        if not asleep[m[1][j]]:
+            worst = max(worst, _gap(m, pos, quat, j))
+    return worst
 
 
 @njit(cache=True, error_model="numpy")
@@ -162,28 +184,33 @@ def _apply_side(body, n, resp, lam, vel):
 
 
 @njit(cache=True, error_model="numpy")
-def project(m, tree, pws, pos, quat):
+def project(m, tree, pws, pos, quat, asleep):
     """Pull joint anchors together in place (solver.stabilize.project_joints); False if the
     projection system is degenerate.  tree = (order, parent, no_rheo, rows, size, tw);
-    pws = (rows, resp_a, resp_b, rot, inv_i, inertia_w, μ) scratch."""
+    pws = (rows, resp_a, resp_b, rot, inv_i, inertia_w, μ) scratch.  The joints of
+    sleeping bodies (asleep) are left as they are."""
     order, parent, no_rheo, rows, size, tw = tree
     prw, pa, pb, rot, inv_i, inertia_w, mu = pws
     nb, nj = len(pos), len(m[0])
     zeros = np.zeros((nb, 6))
+    seq, nseq = np.empty(len(order), np.int64), 0
+    for i in order:
+        if not (asleep[i] if i < nb else asleep[m[1][i - nb]]):
+            seq[nseq], nseq = i, nseq + 1
     for _ in range(PROJECT_ROUNDS):
-        if nj == 0 or joint_gaps(m, pos, quat)[0] <= PROJECT_TOL:
+        if nj == 0 or _awake_gap(m, pos, quat, asleep) <= PROJECT_TOL:
             break
         for b in range(nb):
             qmatrix(quat_at(quat, b), rot, b)
             congruence(rot, b, m[18], b, inv_i, b)
             congruence(rot, b, m[17], b, inertia_w, b)
-        n = anchor_rows(m, pos, rot, pos, 1.0, 1.0, False, prw, 0)
+        n = anchor_rows(m, pos, rot, pos, 1.0, 1.0, False, asleep, prw, 0)
         response(prw, n, m[16], inv_i, 1.0, pa, pb)
         prw[6][:n] = PROJECT_RIDGE
         for i in order:
             size[i] = node_rows(i, nb, no_rheo, rows[i])
         if not tree_solve(
-            order, len(order), parent, nb, prw, zeros, 1.0, m[15], inertia_w, rows, size, tw, mu
+            seq, nseq, parent, nb, prw, zeros, 1.0, m[15], inertia_w, rows, size, tw, mu
         ):
             return False
         delta = np.zeros((nb, 6))
@@ -198,8 +225,9 @@ def project(m, tree, pws, pos, quat):
 
 
 @njit(cache=True, error_model="numpy")
-def rheology_update(m, opt, st, rw, n, lam, vel, rheo_joint, quat, out):
-    """q_sf, yield flags, anchors, torque filter and torques after the solve."""
+def rheology_update(m, opt, st, rw, n, lam, vel, rheo_joint, quat, asleep, out):
+    """q_sf, yield flags, anchors, torque filter and torques after the solve; the joints
+    of sleeping bodies (asleep) keep their state (their torque reads 0: no rows)."""
     kf, df, dd, has, yield_, plastic, finite_yield = m[4], m[5], m[6], m[7], m[12], m[13], m[14]
     q_sf0, yielded0, anchor0, avg0 = st[4], st[5], st[6], st[7]
     q_sf, yielded, anchor, avg, torque = out
@@ -245,3 +273,15 @@ def rheology_update(m, opt, st, rw, n, lam, vel, rheo_joint, quat, out):
             yielded[j] = False
         if has[j] and not flowing(plastic, finite_yield, yielded, j):
             put(q_sf, j, qlog(qmul(qr, qconj(quat_at(anchor, j)))))
+        if asleep[bone[j]]:
+            _freeze(j, q_sf0, yielded0, anchor0, avg0, q_sf, yielded, anchor, avg)
+
+
+@njit(cache=True, error_model="numpy")
+def _freeze(j, q_sf0, yielded0, anchor0, avg0, q_sf, yielded, anchor, avg):
+    """Joint j keeps its rheology and yield state (its island sleeps)."""
+    for k in range(3):
+        q_sf[j, k] = q_sf0[j, k]
+    for k in range(4):
+        anchor[j, k] = anchor0[j, k]
+    yielded[j], avg[j] = yielded0[j], avg0[j]

@@ -91,15 +91,35 @@ def arc_offset(omega, r, h):
 
 
 @njit(cache=True, error_model="numpy")
-def anchor_rows(m, pos, rot, omega, h, erp, arc, rw, n):
+def null_rows(rw, n, kind, j, count):
+    """``count`` empty rows in joint j's slots (its island sleeps: solver.sleep): no
+    bodies, no Jacobian, so no solver sees them; returns the next row."""
+    for k in range(count):
+        set_row(rw, n, kind, 3 * j + k, -1, -1, (ZERO, ZERO), (ZERO, ZERO), -INF, INF, 0.0,
+                0.0, -1, 0.0)  # fmt: skip
+        n += 1
+    return n
+
+
+@njit(cache=True, error_model="numpy")
+def is_null(rw, i):
+    """Row i is an empty slot (null_rows)."""
+    return rw[0][i] < 0 and rw[1][i] < 0
+
+
+@njit(cache=True, error_model="numpy")
+def anchor_rows(m, pos, rot, omega, h, erp, arc, asleep, rw, n):
     """Three hard rows per joint (anchors pushed at their midpoint), bias (erp·C + N_c − N_p)/h.
 
     rot (nb,3,3) body rotations; omega (nb,3) the angular velocities of the arc terms
     (the last step's solved ones, as solver.step); arc=False drops the arc terms (the
-    projection's rows)."""
+    projection's rows); asleep (nb,) bool: joints of sleeping bodies get empty rows."""
     parent, bone, anc_p, anc_c = m[0], m[1], m[2], m[3]
     for j in range(len(parent)):
         p, c = parent[j], bone[j]
+        if asleep[c]:
+            n = null_rows(rw, n, KIND_JOINT, j, 3)
+            continue
         com_p = vec(pos, p) if p >= 0 else ZERO
         arm_p = matvec(rot, p, vec(anc_p, j)) if p >= 0 else vec(anc_p, j)
         a_p = add(com_p, arm_p)
@@ -141,7 +161,7 @@ def flowing(plastic, finite_yield, yielded, j):
 
 
 @njit(cache=True, error_model="numpy")
-def rheology_rows(m, quat, rot, h, q_sf, yielded, anchor, rheo_joint, rw, n):
+def rheology_rows(m, quat, rot, h, q_sf, yielded, anchor, asleep, rheo_joint, rw, n):
     """Three compliant rows per joint with rheology, on the parent's axes a_k = R_p e_k:
     Voigt C = 1/(D_f + K_f h), bias K_f δ/(D_f + K_f h), δ = log(q_rel ⊗ anchor⁻¹);
     three-element C = (D_d + D_f + K_f h)/(D_d (K_f h + D_f)), bias K_f q_sf/(K_f h + D_f)."""
@@ -149,6 +169,11 @@ def rheology_rows(m, quat, rot, h, q_sf, yielded, anchor, rheo_joint, rw, n):
     plastic, finite_yield = m[13], m[14]
     for j in range(len(parent)):
         if not has[j]:
+            continue
+        if asleep[bone[j]]:
+            for k in range(3):
+                rheo_joint[n + k] = j
+            n = null_rows(rw, n, KIND_RHEOLOGY, j, 3)
             continue
         p = parent[j]
         delta = qlog(qmul(q_rel(j, parent, bone, quat), qconj(quat_at(anchor, j))))
@@ -191,14 +216,17 @@ def _wrap(x):
 
 
 @njit(cache=True, error_model="numpy")
-def limit_rows(m, quat, rot, h, erp, margin, rw, n):
+def limit_rows(m, quat, rot, h, erp, margin, asleep, rw, n):
     """One-sided rows (λ ≥ 0) for limits within ``margin``: swing rows of every joint,
     then twist-low, then twist-high; bias C/h when C ≥ 0 (speculative) else erp·C/h.
     swing θ = acos(d·d'), C = swing − θ, axis −R_p (d × d')/|d × d'|;
-    twist φ = 2 atan2(q.xyz·d, q.w) wrapped to [−π, π), C = φ − lo or hi − φ, axis ±R_p d'."""
+    twist φ = 2 atan2(q.xyz·d, q.w) wrapped to [−π, π), C = φ − lo or hi − φ, axis ±R_p d'.
+    Joints of sleeping bodies (asleep) have none."""
     parent, bone, axis_rest, swing, tw_lo, tw_hi = m[0], m[1], m[8], m[9], m[10], m[11]
     for slot in range(3):
         for j in range(len(parent)):
+            if asleep[bone[j]]:
+                continue
             p = parent[j]
             q = q_rel(j, parent, bone, quat)
             d = vec(axis_rest, j)

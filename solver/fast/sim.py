@@ -1,64 +1,80 @@
 """A simulation whose state lives in arrays the compiled step updates in place.
 
 ``fast_step`` returns a new State every step, as ``solver.step.step`` does, and a State
-is a dozen fresh arrays: boxing them out of the compiled step, building the State and
-dropping the previous one costs tens of microseconds per step, about a third of a doll
-step.  ``Sim`` keeps the state in its own arrays and steps them in place (as MuJoCo's
-mjData), so a step only passes its input in and its report out:
+is a dozen fresh arrays: allocating them, passing them in and out of the compiled step,
+building the State and its report and dropping the previous one is most of what a step
+costs outside the kernel.  ``Sim`` keeps the state in its own arrays and steps them in
+place (as MuJoCo's mjData), so a step only passes its input in and its report out:
 
     sim = Sim(model)                 # or Sim(model, state)
     for inp in inputs:
         report = sim.step(inp)       # the same StepReport as fast_step's
     state = sim.state                # a State (a copy) whenever one is wanted
 
-The states are exactly fast_step's (the same kernel); a step the kernel hands back
-(substeps, a box–box contact, a monitor failure, an unsupported model) runs through
-``fast_step`` on a snapshot, so errors and results are the same too.
+On the doll's grip scene at h = 1 ms a step costs ~20 µs outside the kernel's own work,
+against ~35 µs for fast_step (docs/performance.md).  The states are exactly fast_step's
+(the same kernel); a step the kernel hands back (substeps, a box–box contact, a monitor
+failure, an unsupported model) runs through ``fast_step`` on a snapshot, so errors and
+results are the same too.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from solver.fast import _input_arrays, fast_step, kernel_report
-from solver.fast.kernel import OK, inplace_kernel
+from solver.fast import _NO_INPUT, _input_arrays, entry_point, fast_step, kernel_report
+from solver.fast.entry import SIM_SCHEMA, inplace_kernel
+from solver.fast.flat import flatten
+from solver.fast.kernel import OK
 from solver.fast.pack import fast_model
 from solver.model import Model
 from solver.state import State, StepInput, StepReport, initial_state
 
 _FIELDS = (
     "body_pos", "body_quat", "body_vel", "body_omega", "joint_q_sf", "joint_yielded",
-    "joint_anchor", "joint_torque_avg", "joint_torque",
+    "joint_anchor", "joint_torque_avg", "joint_torque", "body_asleep", "body_still",
 )  # fmt: skip
+_BOOL = ("joint_yielded", "body_asleep")
+_KERNEL = entry_point(inplace_kernel)
 
 
 class Sim:
-    """One model's simulation, stepped in place (module docstring).  One thread at a time."""
+    """One model's simulation, stepped in place (module docstring).  One thread at a time.
+
+    Its arrays are views of one flat store (solver.fast.entry.SIM_SCHEMA), passed to the
+    step whole: two sets of state arrays (``_FIELDS``; a step reads set ``_phase`` and
+    writes the other, since it must not overwrite what it still reads and a step handed
+    back to fast_step must find the old state intact), the warm keys and λ, the report."""
 
     def __init__(self, model: Model, state: State | None = None) -> None:
         self.model = model
         self._fm = fast_model(model)
-        self._rep_i, self._rep_f = np.zeros(4, np.int64), np.zeros(10)
         self.load(initial_state(model) if state is None else state)
 
     def load(self, state: State) -> None:
         """Make ``state`` the current state (copied)."""
-        dtypes = [np.bool_ if f == "joint_yielded" else np.float64 for f in _FIELDS]
-        self._buf = tuple(
-            np.array(getattr(state, f), dtype=d, order="C")
-            for f, d in zip(_FIELDS, dtypes, strict=True)
-        )
-        room = max(len(self._fm.ws[0][0]), len(state.warm_key))
+        nb, nj = len(self._fm.zeros), len(self._fm.m[0])
+        current = tuple(_field(state, f, nb) for f in _FIELDS)
+        if [len(a) for a in current] != [nb] * 4 + [nj] * 5 + [nb] * 2:  # the step trusts these
+            raise ValueError(f"Sim.load: not a state of this model ({nb} bodies, {nj} joints)")
+        n = len(state.warm_key)
+        room = max(len(self._fm.ws[0][0]), n)
         keys, lam = np.zeros(room, np.int64), np.zeros(room)
-        keys[: len(state.warm_key)], lam[: len(state.warm_lam)] = state.warm_key, state.warm_lam
-        self._warm = (keys, lam, np.array([len(state.warm_key)], np.int64))
+        keys[:n], lam[:n] = state.warm_key, state.warm_lam
+        warm = (keys, lam, np.array([n], np.int64))
+        spare = tuple(np.empty_like(a) for a in current)
+        parts = (current, spare, warm, np.zeros(4, np.int64), np.zeros(10))
+        self._store, views = flatten(parts, SIM_SCHEMA)
+        self._sets, self._warm, self._rep_i, self._rep_f = views[:2], *views[2:]
+        self._phase = 0
         self.time, self.steps = float(state.time), int(state.step)
 
     @property
     def state(self) -> State:
         """The current state, as a State of its own arrays."""
         n = int(self._warm[2][0])
-        arrays = {f: a.copy() for f, a in zip(_FIELDS, self._buf, strict=True)}
+        current = self._sets[self._phase]
+        arrays = {f: a.copy() for f, a in zip(_FIELDS, current, strict=True)}
         return State(
             time=self.time, step=self.steps, warm_key=self._warm[0][:n].copy(),
             warm_lam=self._warm[1][:n].copy(), **arrays,
@@ -66,18 +82,25 @@ class Sim:
 
     def step(self, inp: StepInput | None = None) -> StepReport:
         """Advance one step of size model.options.h, exactly as ``fast_step``."""
-        inp = inp or StepInput()
+        inp = inp or _NO_INPUT
         fm = self._fm
         ins = _input_arrays(fm, inp) if fm.reason is None else None
         if ins is not None:
-            status, _ = inplace_kernel(
-                fm.m, fm.g, fm.tree, fm.ptree, fm.ws, fm.pws, fm.opt, fm.iopt, self._buf,
-                self._warm, ins, self._rep_i, self._rep_f,
-            )  # fmt: skip
+            status, _ = _KERNEL[0](fm.flat, self._store, self._phase, ins)
             if status == OK:
+                self._phase ^= 1
                 self.time += self.model.options.h
                 self.steps += 1
-                return kernel_report(self._rep_i, self._rep_f)
+                return kernel_report(self._rep_i, self._rep_f.copy())
         new, report = fast_step(self.model, self.state, inp)
         self.load(new)
         return report
+
+
+def _field(state: State, name: str, nb: int) -> np.ndarray:
+    """A field of ``state`` as the step's array (the sleep fields of a State without them:
+    all awake)."""
+    value = getattr(state, name)
+    if name in ("body_asleep", "body_still") and len(value) == 0:
+        value = np.zeros(nb)
+    return np.array(value, dtype=np.bool_ if name in _BOOL else np.float64, order="C")

@@ -359,10 +359,12 @@ def tree_substitute(seq, nseq, parent, nb, size, tw, x, fwd, fwd_tag, bwd, bwd_t
 
 
 @njit(cache=True, error_model="numpy")
-def forest_sequence(tree, nb, movable, free_grip, ngrip, body):
+def forest_sequence(tree, nb, movable, free_grip, ngrip, body, asleep, joint_bone):
     """Fill the elimination sequence (seq, parent, rows, size of ``tree``) for the joint
     forest and, with ngrip > 0, the grip's node of the rows free_grip[:ngrip], a leaf of
-    the gripped body (its own root when the body cannot move); returns its length."""
+    the gripped body (its own root when the body cannot move); returns its length.
+    Sleeping islands (asleep (nb,) bool) are left out: each is a whole component of the
+    forest, with no rows (solver.sleep)."""
     order, parent, rheo_start, _, seq, rows, size, _ = tree
     node = nb + len(rheo_start)
     nseq = 0
@@ -373,6 +375,8 @@ def forest_sequence(tree, nb, movable, free_grip, ngrip, body):
         for k in range(ngrip):
             rows[node, k] = free_grip[k]
     for i in order:
+        if asleep[i] if i < nb else asleep[joint_bone[i - nb]]:
+            continue
         seq[nseq] = i
         nseq += 1
         size[i] = node_rows(i, nb, rheo_start, rows[i])

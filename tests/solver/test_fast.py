@@ -148,9 +148,9 @@ def test_tumbling_chain_with_joint_projection_matches(monkeypatch):
     # (post-stabilisation) engages in both implementations.
     projected = []
 
-    def counting(model, pos, q, *args):
+    def counting(model, pos, q, *args, **kwargs):
         projected.append(joint_gaps(model, pos, q).max() > 1e-4)
-        return project_joints(model, pos, q, *args)
+        return project_joints(model, pos, q, *args, **kwargs)
 
     monkeypatch.setattr("solver.step.project_joints", counting)
     spec = chain(4, 0.01, root_mode="free", gravity=(0, 0, 0), lengths=[0.3, 0.1, 0.4, 0.2])

@@ -78,7 +78,7 @@ def test_narrow_phase_equals_numpy_collide(seed):
         q = np.tile(quat.IDENTITY, (nb, 1))
     for margin in (0.0, 0.01, 0.1):
         world_shapes(g, pos, q, centre, rot)
-        n = collide_scene(g, centre, rot, margin, cb, True)
+        n = collide_scene(g, centre, rot, margin, cb, True, np.ones(nb, np.bool_))
         assert_same_contacts(collide.collide(model.geometry, pos, q, margin), cb, n)
     state = replace(initial_state(model), body_pos=pos, body_quat=q)
     for radius in (0.02, 0.1):
@@ -97,7 +97,10 @@ def test_box_box_within_reach_is_declined():
     q = np.tile(quat.IDENTITY, (model.nbody, 1))
     g, cb, centre, rot = fm.g, fm.ws[4], fm.ws[8], fm.ws[9]
     world_shapes(g, pos, q, centre, rot)
-    assert collide_scene(g, centre, rot, 0.01, cb, True) >= 0  # one box only: nothing to decline
+    awake = np.ones(model.nbody, np.bool_)
+    assert (
+        collide_scene(g, centre, rot, 0.01, cb, True, awake) >= 0
+    )  # one box only: nothing to decline
     boxes = replace(
         mixed_scene(),
         props=mixed_scene().props
@@ -112,7 +115,12 @@ def test_box_box_within_reach_is_declined():
     pos2, q2 = np.zeros((len(pos) + 1, 3)), np.tile(quat.IDENTITY, (len(pos) + 1, 1))
     pos2[-2:] = [[0.0, 1.0, 0.0], [0.1, 1.0, 0.0]]  # the two boxes overlap
     world_shapes(fm2.g, pos2, q2, fm2.ws[8], fm2.ws[9])
-    assert collide_scene(fm2.g, fm2.ws[8], fm2.ws[9], 0.01, fm2.ws[4], True) == -1
+    assert (
+        collide_scene(
+            fm2.g, fm2.ws[8], fm2.ws[9], 0.01, fm2.ws[4], True, np.ones(len(pos2), np.bool_)
+        )
+        == -1
+    )
 
 
 @pytest.mark.parametrize("root_mode", ["free", "fixed", "ball"])

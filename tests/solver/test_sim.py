@@ -68,3 +68,9 @@ def test_a_broken_simulation_raises_the_same_error():
         for _ in range(100):
             sim.step()
     assert str(got.value) == str(expected.value)
+
+
+def test_a_state_of_another_model_is_refused():
+    small, large = build_model(chain(3, 0.01)), build_model(chain(5, 0.01))
+    with pytest.raises(ValueError, match="not a state of this model"):
+        Sim(small, initial_state(large))

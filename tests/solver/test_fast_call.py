@@ -1,0 +1,56 @@
+"""The Python around the compiled step (solver.fast.fast_step): the States and reports it
+builds cheaply are the ones the ordinary constructors build."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+
+import solver.fast as fast
+from solver.fast import FIELDS, SOLVER_NAMES, _successor, kernel_report
+from solver.state import State, StepReport
+
+
+def same(got, want) -> bool:
+    if type(got) is not type(want) or vars(got).keys() != vars(want).keys():
+        return False
+    for name, value in vars(want).items():
+        mine = getattr(got, name)
+        if isinstance(value, np.ndarray):
+            if not (mine.dtype == value.dtype and np.array_equal(mine, value)):
+                return False
+        elif mine != value or type(mine) is not type(value):
+            return False
+    return repr(got) == repr(want)
+
+
+def test_kernel_fields_are_state_fields():
+    names = [f.name for f in dataclasses.fields(State)]
+    assert names[: 2 + len(FIELDS)] == ["time", "step", *FIELDS]
+    assert [f.name for f in dataclasses.fields(StepReport)] == list(fast._REPORT_FIELDS)
+    # the cheap constructions are in use (else fast_step is ~3 µs slower a step)
+    assert fast._STATE_REST is not None and fast._DIRECT_REPORT
+
+
+def test_states_and_reports_are_the_constructors():
+    arrays = tuple(np.full(k + 1, float(k)) for k in range(len(FIELDS)))
+    got = _successor(State(0.0, 0, *arrays), 0.5, 3, arrays[:9] + arrays[11:], *arrays[9:11])
+    assert same(got, State(0.5, 3, *arrays))
+    assert dataclasses.replace(got, step=4).step == 4
+    rep_f = np.arange(10.0)
+    got = kernel_report(np.array([108, 2, 15, 1]), rep_f)
+    want = StepReport(108, 2, 15, 0.0, SOLVER_NAMES[1], rep_f[1:4], rep_f[4:7], rep_f[7:10])
+    assert same(got, want)
+
+
+def test_a_state_subclass_keeps_its_fields():
+    @dataclasses.dataclass(frozen=True)
+    class Tagged(State):
+        tag: str = ""
+
+    arrays = tuple(np.full(2, float(k)) for k in range(len(FIELDS)))
+    got = _successor(
+        Tagged(0.0, 0, *arrays, tag="a"), 0.5, 1, arrays[:9] + arrays[11:], *arrays[9:11]
+    )
+    assert type(got) is Tagged and got.tag == "a" and got.time == 0.5
