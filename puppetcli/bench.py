@@ -8,12 +8,20 @@ on the compiled step (``solver.fast.fast_step``, what the CLI uses); the numpy s
 measured only for the baseline unless asked, since it is ~40× slower and its other
 solvers say nothing about the CLI.
 
+Engines: ``fast`` is ``fast_step`` (a new State every step, as the numpy step and
+the CLI's script runner); ``sim`` is ``solver.fast.sim.Sim``, the same kernel stepping
+its own arrays in place (as MuJoCo's mj_step steps mjData: the loop for driving a
+device); ``numpy`` is ``solver.step.step``.
+
 The scene (``time_run``): the doll standing on its stand, its left forearm's end
 gripped (position only, ``GRIP``) and lifted by ``LIFT`` along a minimum-jerk path over
 ``seconds``.  Each configuration first takes a few untimed steps (JIT compilation,
 caches), then is timed from rest ``repeats`` times; the best run counts (other
 processes only ever slow a run down).  Repeats are chosen so that every configuration
-times enough steps to be steady (``MIN_TIMED_STEPS``), as MuJoCo's runs are.
+times enough steps to be steady (``MIN_TIMED_STEPS``), as MuJoCo's runs are, and the
+runs of all configurations at one scene and step are interleaved, round by round, so a
+machine whose speed drifts (a shared 2-core VM does, by up to ~1.5× over seconds)
+slows every configuration alike and the ratios stay honest.
 """
 
 from __future__ import annotations
@@ -32,6 +40,7 @@ from puppetcli.rigfile import load_rig
 from solver import quat
 from solver.errors import SimulationError
 from solver.fast import fast_step
+from solver.fast.sim import Sim
 from solver.grip import make_coupling
 from solver.model import Model, build_model
 from solver.state import StepInput, initial_state
@@ -41,8 +50,8 @@ RIGS = Path(__file__).resolve().parent.parent / "rigs"
 WARMUP_STEPS = 5
 BASELINE = "pgs"  # on the numpy step
 SOLVERS = ("pgs", "hybrid", "auto", "direct")
-MIN_TIMED_STEPS = {"fast": 1500, "numpy": 100, "mujoco": 1500}
-MIN_REPEATS = {"fast": 3, "numpy": 1, "mujoco": 3}
+MIN_TIMED_STEPS = {"fast": 3000, "sim": 3000, "numpy": 100, "mujoco": 3000}
+MIN_REPEATS = {"fast": 5, "sim": 5, "numpy": 1, "mujoco": 5}
 MUJOCO_INTEGRATORS = ("Euler", "implicitfast")
 NAN = math.nan
 INSTALL_HINT = "peers: mujoco is not installed (pip install '.[bench]' to compare with MuJoCo)"
@@ -101,7 +110,7 @@ GRIP = dict(  # the script's default gains, position-only (as for pulls)
 LIFT = np.array([0.0, 0.15, 0.15])  # m: where the grip takes the forearm's end
 GRIP_BONE = "forearm_l"
 
-ENGINES = {"numpy": step, "fast": fast_step}
+ENGINES = {"numpy": step, "fast": fast_step, "sim": None}  # sim: time_run's own loop
 
 
 def grip_inputs(model: Model, lift: float, steps: int) -> list[StepInput]:
@@ -133,22 +142,39 @@ def repeats_for(steps: int, engine: str) -> int:
 def time_run(model: Model, seconds: float, engine: str = "fast", repeats: int = 1) -> Timing:
     """The grip scene (``grip_inputs``, lift over ``seconds``) from rest, best of
     ``repeats`` timed runs after WARMUP_STEPS untimed steps."""
-    step_fn = ENGINES[engine]
+    timed = run_timer(model, seconds, engine)
+    return min((timed() for _ in range(repeats)), key=lambda t: t.seconds)
+
+
+def run_timer(model: Model, seconds: float, engine: str = "fast"):
+    """A function that times one run of ``time_run``'s scene from rest on ``engine`` and
+    returns its Timing (the warm-up and the inputs are made once, here)."""
+    step_fn = ENGINES[engine] or fast_step
     state = initial_state(model)
     for _ in range(WARMUP_STEPS):
         state, _ = step_fn(model, state)
     n = max(1, round(seconds / model.options.h))
     inputs = grip_inputs(model, seconds, n)
-    best = math.inf
-    for _ in range(repeats):
-        state, contacts, substeps = initial_state(model), 0, 0
-        start = time.perf_counter()
-        for inp in inputs:
-            state, report = step_fn(model, state, inp)
-            contacts += report.contacts
-            substeps += report.substeps
-        best = min(best, time.perf_counter() - start)
-    return Timing(n, best, contacts / n, substeps / n)
+
+    def timed() -> Timing:
+        contacts, substeps = 0, 0
+        if engine == "sim":
+            sim = Sim(model)
+            start = time.perf_counter()
+            for inp in inputs:
+                report = sim.step(inp)
+                contacts += report.contacts
+                substeps += report.substeps
+        else:
+            state = initial_state(model)
+            start = time.perf_counter()
+            for inp in inputs:
+                state, report = step_fn(model, state, inp)
+                contacts += report.contacts
+                substeps += report.substeps
+        return Timing(n, time.perf_counter() - start, contacts / n, substeps / n)
+
+    return timed
 
 
 def measure(
@@ -164,63 +190,99 @@ def measure(
     rows = []
     for name, model in scenes.items():
         for h in steps_h:
-            base = _measure_one(name, model, h, BASELINE, "numpy", seconds, None)
-            here = [base]
+            trials = [_ours(name, model, h, BASELINE, "numpy", seconds)]
             for solver in solvers:
                 for engine in engines:
                     if (solver, engine) != (BASELINE, "numpy"):
-                        here.append(_measure_one(name, model, h, solver, engine, seconds, base))
+                        trials.append(_ours(name, model, h, solver, engine, seconds))
             if peers and name == "doll":
-                here += mujoco_rows(h, seconds, base)
-            rows += _against_mujoco(here)
+                trials += [_mujoco(h, seconds, integrator) for integrator in MUJOCO_INTEGRATORS]
+            here = _interleaved(trials)
+            rows += _against_mujoco([_with_ratio(r, here[0]) for r in here])
     return rows
+
+
+@dataclass
+class Trial:
+    """One configuration to time: ``run()`` times one run and returns its row (steps/s
+    from that run); ``repeats`` runs are made, interleaved with the other trials'
+    (``_interleaved``), and the fastest counts.  ``row`` is final when no run is due."""
+
+    repeats: int
+    run: object  # () -> BenchRow, or None when the row is already final
+    row: BenchRow | None = None
+
+
+def _interleaved(trials: list[Trial]) -> list[BenchRow]:
+    """The rows of ``trials``, their runs made round by round (module docstring); a trial
+    whose run fails (a row without steps) stops there with that row."""
+    for k in range(max(t.repeats for t in trials)):
+        for t in trials:
+            if t.run is None or k >= t.repeats:
+                continue
+            row = t.run()
+            if not row.steps:
+                t.row, t.run = row, None
+            elif t.row is None or row.seconds < t.row.seconds:
+                t.row = replace(row, repeats=t.repeats)
+    return [t.row for t in trials]
+
+
+def _with_ratio(row: BenchRow, base: BenchRow) -> BenchRow:
+    """``row`` with its ratio to the baseline row (its steps/s ÷ the baseline's)."""
+    return replace(row, ratio=row.steps_per_s / base.steps_per_s)
 
 
 def _failed(name: str, h: float, solver: str, engine: str, note: str) -> BenchRow:
     return BenchRow(name, h, solver, engine, 0, 0, NAN, NAN, NAN, NAN, NAN, NAN, NAN, note)
 
 
-def _measure_one(
-    name: str, model: Model, h: float, solver: str, engine: str, seconds: float, base
-) -> BenchRow:
+def _ours(name: str, model: Model, h: float, solver: str, engine: str, seconds: float) -> Trial:
+    """The trial of one of our (solver, engine) on the grip scene (``time_run``)."""
     if solver == "direct" and (model.has_collision or model.has_limits):
-        return _failed(name, h, solver, engine, "n/a: direct needs two-sided rows only")
-    if engine == "fast" and solver == "reference":
-        return _failed(name, h, solver, engine, "n/a: numpy only")
+        return Trial(
+            0, None, _failed(name, h, solver, engine, "n/a: direct needs two-sided rows only")
+        )
+    if engine != "numpy" and solver == "reference":
+        return Trial(0, None, _failed(name, h, solver, engine, "n/a: numpy only"))
     m = model.with_options(h=h, method=solver, iterations=15, warm_start=True)
     span = seconds if solver != "reference" else min(seconds, 20 * h)
-    repeats = repeats_for(max(1, round(span / h)), engine)
-    try:
-        t = time_run(m, span, engine, repeats)
-    except SimulationError as exc:
-        return _failed(name, h, solver, engine, f"failed: {str(exc)[:60]}")
-    rate = t.steps / t.seconds
-    ratio = rate / base.steps_per_s if base is not None else 1.0
-    return BenchRow(name, h, solver, engine, t.steps, repeats, t.seconds, rate,
-                    t.steps * h / t.seconds, ratio, contacts=t.contacts,
-                    substeps=t.substeps)  # fmt: skip
+    timer = []  # made at the first run, inside the trial's error handling
+
+    def run() -> BenchRow:
+        try:
+            timer[:] = timer or [run_timer(m, span, engine)]
+            t = timer[0]()
+        except SimulationError as exc:
+            return _failed(name, h, solver, engine, f"failed: {str(exc)[:60]}")
+        return BenchRow(name, h, solver, engine, t.steps, 1, t.seconds, t.steps / t.seconds,
+                        t.steps * h / t.seconds, NAN, contacts=t.contacts,
+                        substeps=t.substeps)  # fmt: skip
+
+    return Trial(repeats_for(max(1, round(span / h)), engine), run)
 
 
-def mujoco_rows(h: float, seconds: float, base: BenchRow) -> list[BenchRow]:
-    """MuJoCo on the same doll scene (``puppetcli.peers.doll_speed``), one row per
-    integrator in MUJOCO_INTEGRATORS; engine "mujoco"."""
+def _mujoco(h: float, seconds: float, integrator: str) -> Trial:
+    """The trial of MuJoCo with ``integrator`` on the same doll scene
+    (``puppetcli.peers.doll_speed``); engine "mujoco"."""
     from puppetcli import peers
 
-    rows = []
     n = max(1, round(seconds / h))
-    for integrator in MUJOCO_INTEGRATORS:
-        if n < peers.WARMUP_STEPS:  # doll_speed warms up on the run's own inputs
-            note = f"n/a: MuJoCo's run needs ≥ {peers.WARMUP_STEPS} steps"
-            rows.append(_failed("doll", h, integrator.lower(), "mujoco", note))
-            continue
-        r = peers.doll_speed(h, seconds, integrator, repeats=repeats_for(n, "mujoco"))
-        rate = r["steps_per_s"]
-        rows.append(BenchRow("doll", h, integrator.lower(), "mujoco", r["steps"],
-                             repeats_for(n, "mujoco"), r["seconds"], rate,
-                             r["steps"] * h / r["seconds"], rate / base.steps_per_s,
-                             contacts=r["contacts"],
-                             note="diverged" if r["diverged"] else ""))  # fmt: skip
-    return rows
+    if n < peers.WARMUP_STEPS:  # doll_speed warms up on the run's own inputs
+        note = f"n/a: MuJoCo's run needs ≥ {peers.WARMUP_STEPS} steps"
+        return Trial(0, None, _failed("doll", h, integrator.lower(), "mujoco", note))
+
+    timer = []
+
+    def run() -> BenchRow:
+        timer[:] = timer or [peers.doll_timer(h, seconds, integrator)]
+        r = timer[0]()
+        return BenchRow("doll", h, integrator.lower(), "mujoco", r["steps"], 1, r["seconds"],
+                        r["steps_per_s"], r["steps"] * h / r["seconds"], NAN,
+                        contacts=r["contacts"],
+                        note="diverged" if r["diverged"] else "")  # fmt: skip
+
+    return Trial(repeats_for(n, "mujoco"), run)
 
 
 def _against_mujoco(rows: list[BenchRow]) -> list[BenchRow]:
@@ -259,14 +321,17 @@ def peer_summary(rows: list[BenchRow]) -> list[str]:
     for h in dict.fromkeys(r.h for r in rows):
         here = [r for r in rows if r.scene == "doll" and r.h == h and math.isfinite(r.steps_per_s)]
         mj = [r for r in here if r.engine == "mujoco"]
-        for ours in (r for r in here if r.engine == "fast"):
+        for ours in (r for r in here if r.engine in ("fast", "sim")):
             vs = ", ".join(
                 f"{ours.steps_per_s / m.steps_per_s:.2f}× MuJoCo {m.solver} "
                 f"({m.steps_per_s:,.0f}{', diverged' if m.note else ''})"
                 for m in mj
             )
             if vs:
-                lines.append(f"doll h={h:g}: {ours.solver} {ours.steps_per_s:,.0f} steps/s = {vs}")
+                lines.append(
+                    f"doll h={h:g}: {ours.solver} ({ours.engine}) {ours.steps_per_s:,.0f} steps/s"
+                    f" = {vs}"
+                )
     return lines
 
 

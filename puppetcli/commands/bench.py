@@ -44,11 +44,13 @@ SOLVER_CHOICES = [*SOLVERS, "reference"]
 @click.option(
     "--engine",
     "engines",
-    type=click.Choice(["fast", "numpy"]),
+    type=click.Choice(["fast", "sim", "numpy"]),
     multiple=True,
-    default=("fast",),
+    default=("fast", "sim"),
     show_default=True,
-    help="Steps to run every solver on (repeatable); numpy PGS, the baseline, always runs.",
+    help="Steps to run every solver on (repeatable): fast_step (a new State a step, as the "
+    "CLI), sim (the same kernel stepping in place, as for a device) or numpy; numpy PGS, "
+    "the baseline, always runs.",
 )
 @click.option(
     "--seconds",
@@ -106,10 +108,13 @@ def command(
     Scenes: `doll` (rigs/doll.yaml: ground contacts, limits, rheology, a grip lifting
     the left forearm along a minimum-jerk path) and `doll-joints` (the same doll
     without ground or limits: two-sided rows only, where the direct solver applies).
-    Every solver runs on the compiled step (what the CLI uses); the ratio column is
+    Every solver runs on the compiled step, as `fast` (a new State every step, what the
+    CLI's script runner does) and `sim` (the same kernel stepping its own arrays in
+    place, the loop for driving a device, as MuJoCo's mj_step); the ratio column is
     against PGS (15 iterations, warm start) on the numpy step at the same scene and
     step, measured in the same run.  With --peers, MuJoCo (Euler and implicitfast) on
-    the same doll scene, and the ratio of ours to it.
+    the same doll scene, and the ratio of ours to it.  The runs of all configurations
+    are interleaved round by round, so a drifting machine slows them alike.
 
     After the table, where a doll step's time goes, stage by stage (read from the
     processor's cycle counter inside the compiled step).  With --skips: each skip of

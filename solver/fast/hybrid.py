@@ -121,12 +121,13 @@ def _solve_exact(seq, nseq, parent, nb, rw, vel, rows, size, tw, movable, lam, o
 def dormant_rows(rw, n, lam0):
     """solver.hybrid.dormant_rows on the table's first n rows."""
     out = np.zeros(n, dtype=np.bool_)
+    lo, hi, bias, fric = rw[4], rw[5], rw[7], rw[8]  # (not rw[k] inside and/or: see _update_sets)
     for i in range(n):
-        if rw[4][i] == 0.0 and rw[5][i] == np.inf and rw[8][i] < 0:
-            out[i] = lam0[i] == 0.0 and rw[7][i] > 0.0
+        if lo[i] == 0.0 and hi[i] == np.inf and fric[i] < 0:
+            out[i] = lam0[i] == 0.0 and bias[i] > 0.0
     for i in range(n):
-        if rw[8][i] >= 0:
-            out[i] = out[rw[8][i]]
+        if fric[i] >= 0:
+            out[i] = out[fric[i]]
     return out
 
 
@@ -188,12 +189,13 @@ def hybrid_solve(m, tree, ws, opt, rw, n, ne, vel_free, lam0, iterations, grip, 
     at_lo, at_hi = np.zeros(n, dtype=np.bool_), np.zeros(n, dtype=np.bool_)
     its, free_grip = np.empty(n, np.int64), np.empty(6, np.int64)
     lam = np.zeros(n)
+    lo, hi, kind = rw[4], rw[5], rw[11]
     vel, sweeps, residual = vel_free.copy(), 0, 0.0
     for _ in range(ROUNDS):
         nu, nfree = 0, 0
         for i in range(ne, n):
-            lam[i] = rw[4][i] if at_lo[i] else rw[5][i] if at_hi[i] else 0.0
-            if rw[11][i] == KIND_GRIP:
+            lam[i] = lo[i] if at_lo[i] else hi[i] if at_hi[i] else 0.0
+            if kind[i] == KIND_GRIP:
                 if not (at_lo[i] or at_hi[i]):
                     free_grip[nfree], nfree = i, nfree + 1
             elif not dormant[i]:
@@ -209,25 +211,29 @@ def hybrid_solve(m, tree, ws, opt, rw, n, ne, vel_free, lam0, iterations, grip, 
         if not _update_sets(rw, ne, n, lam, vel, grip0, ngrip, dormant, at_lo, at_hi):
             return True, lam, vel, sweeps, residual
     for i in range(n):
-        lam[i] = min(max(lam[i], rw[4][i]), rw[5][i])
+        lam[i] = min(max(lam[i], lo[i]), hi[i])
     return True, lam, vel, sweeps, residual
 
 
 @njit(cache=True, error_model="numpy")
 def _update_sets(rw, ne, n, lam, vel, grip0, ngrip, dormant, at_lo, at_hi):
     """Wake crossed dormant rows (and their friction), pin and free grip rows; True when
-    anything changed."""
+    anything changed.
+
+    The row arrays are taken out of the table once: an array read from a tuple inside an
+    and/or costs two uncancelled reference counts each time (~300 ns, numba 0.68)."""
+    lo, hi, comp, bias, fric = rw[4], rw[5], rw[6], rw[7], rw[8]
     changed = False
     for i in range(ne, n):
-        r = row_velocity(rw, i, vel) + rw[6][i] * lam[i] + rw[7][i]
-        if dormant[i] and rw[8][i] < 0 and r < 0.0:
+        r = row_velocity(rw, i, vel) + comp[i] * lam[i] + bias[i]
+        if dormant[i] and fric[i] < 0 and r < 0.0:
             dormant[i], changed = False, True
         elif grip0 <= i < grip0 + ngrip:
             if (at_hi[i] and r > 0.0) or (at_lo[i] and r < 0.0):
                 at_lo[i], at_hi[i], changed = False, False, True
-            elif not (at_lo[i] or at_hi[i]) and (lam[i] < rw[4][i] or lam[i] > rw[5][i]):
-                at_lo[i], at_hi[i], changed = lam[i] < rw[4][i], lam[i] > rw[5][i], True
+            elif not (at_lo[i] or at_hi[i]) and (lam[i] < lo[i] or lam[i] > hi[i]):
+                at_lo[i], at_hi[i], changed = lam[i] < lo[i], lam[i] > hi[i], True
     for i in range(ne, n):
-        if rw[8][i] >= 0 and dormant[i] and not dormant[rw[8][i]]:
+        if fric[i] >= 0 and dormant[i] and not dormant[fric[i]]:
             dormant[i] = False
     return changed

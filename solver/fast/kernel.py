@@ -238,9 +238,10 @@ def direct(m, tree, ws, opt, rw, n, vel_free, grip, asleep):
 def solve(m, tree, ws, opt, iopt, st, n, vel_free, grip, asleep):
     """(status, λ, v, iterations, residual, solver) as solver.step.solve."""
     rw = ws[0]
+    lo, hi, fric = rw[4], rw[5], rw[8]
     bilateral = True
     for i in range(n):
-        if not (rw[4][i] < 0.0 and rw[5][i] > 0.0 and rw[8][i] < 0):
+        if not (lo[i] < 0.0 and hi[i] > 0.0 and fric[i] < 0):
             bilateral = False
     method = iopt[0]
     lam0 = warm_start(opt, iopt, st, rw, n)
@@ -254,8 +255,8 @@ def solve(m, tree, ws, opt, iopt, st, n, vel_free, grip, asleep):
             return OK, lam, vel, 1, residual, SOLVER_DIRECT
         lam0 = lam
     if method == METHOD_HYBRID or (method == METHOD_AUTO and not bilateral):
-        ne = 0
-        while ne < n and rw[11][ne] <= KIND_RHEOLOGY:
+        ne, kind = 0, rw[11]
+        while ne < n and kind[ne] <= KIND_RHEOLOGY:
             ne += 1
         ok, lam, vel, sweeps, residual = hybrid_solve(
             m, tree, ws, opt, rw, n, ne, vel_free, lam0, iopt[1], grip, iopt[9], asleep
@@ -330,9 +331,9 @@ def step_kernel(m, g, tree, ptree, ws, pws, opt, iopt, st, inp, out, rep_i, rep_
         world_shapes(g, pos, quat, ws[8], ws[9])
     asleep, fresh = out[9], np.zeros(nb, dtype=np.bool_)
     wake(m, g, opt, iopt, st, inp, ws[8], out[9], out[10], fresh)
-    awake = np.empty(nb, dtype=np.bool_)
+    awake, movable = np.empty(nb, dtype=np.bool_), m[16]
     for b in range(nb):
-        awake[b] = m[16][b] > 0.0 and not asleep[b]
+        awake[b] = movable[b] > 0.0 and not asleep[b]
     t = tick(prof, on, 0, t)
     vel_free = np.empty((nb, 6))
     free_velocity(m, opt, st, inv_i, inp, vel_free)
@@ -368,27 +369,42 @@ def step_kernel(m, g, tree, ptree, ws, pws, opt, iopt, st, inp, out, rep_i, rep_
     if iopt[10]:
         settle(m[19], asleep, out[10], out[2], out[3], m[1], flowing_joints(m, out[5]), opt[0],
                opt[15], opt[16], opt[17], fresh)  # fmt: skip
-    live = np.empty(n, dtype=np.int64)  # the rows that are not empty slots (solver.sleep)
-    nlive = 0
-    for i in range(n):
-        if not is_null(rw, i):
-            live[nlive], nlive = i, nlive + 1
-    keys = rw[10][live[:nlive]]
-    order = np.argsort(keys, kind="mergesort")
-    rep_i[0], rep_i[1], rep_i[2], rep_i[3] = nlive, ncontact, iters, used
+    keys, values = warm_table(rw, n, lam)
+    rep_i[0], rep_i[1], rep_i[2], rep_i[3] = len(keys), ncontact, iters, used
     rep_f[0] = residual
     report(rw, n, lam, rep_f)
     tick(prof, on, 7, t)
-    return OK, out, keys[order], lam[live[:nlive]][order], rep_i, rep_f
+    return OK, out, keys, values, rep_i, rep_f
+
+
+@njit(cache=True, error_model="numpy")
+def warm_table(rw, n, lam):
+    """(keys, λ) of the rows that are not empty slots (solver.sleep), sorted by key for
+    the next step's binary search.  Keys are unique and the table is built nearly in key
+    order, so an insertion sort costs little more than the copy."""
+    keys, values = np.empty(n, dtype=np.int64), np.empty(n)
+    count = 0
+    for i in range(n):
+        if not is_null(rw, i):
+            keys[count], values[count] = rw[10][i], lam[i]
+            count += 1
+    keys, values = keys[:count], values[:count]
+    for i in range(1, count):
+        key, value, k = keys[i], values[i], i - 1
+        while k >= 0 and keys[k] > key:
+            keys[k + 1], values[k + 1] = keys[k], values[k]
+            k -= 1
+        keys[k + 1], values[k + 1] = key, value
+    return keys, values
 
 
 @njit(cache=True, error_model="numpy")
 def wake(m, g, opt, iopt, st, inp, centre, asleep, still, fresh):
     """asleep, still (nb,) ← the state's, then wake what this step touches (solver.sleep:
     loads, the grip, a free pointer, moving neighbours); all awake when sleeping is off."""
-    nb = len(asleep)
+    nb, was_asleep, was_still = len(asleep), st[10], st[11]
     for b in range(nb):
-        asleep[b], still[b] = (st[10][b], st[11][b]) if iopt[10] else (False, 0.0)
+        asleep[b], still[b] = (was_asleep[b], was_still[b]) if iopt[10] else (False, 0.0)
     if not iopt[10]:
         return
     force, torque, pvec, ivec = inp[0], inp[1], inp[2], inp[4]
@@ -410,8 +426,8 @@ def wake(m, g, opt, iopt, st, inp, centre, asleep, still, fresh):
 @njit(cache=True, error_model="numpy")
 def flowing_joints(m, yielded):
     """(nj,) bool: joints with rheology on the three-element rows (solver.joints.flowing)."""
-    nj = len(m[0])
+    nj, has, plastic, finite_yield = len(m[0]), m[7], m[13], m[14]
     out = np.zeros(nj, dtype=np.bool_)
     for j in range(nj):
-        out[j] = m[7][j] and flowing(m[13], m[14], yielded, j)
+        out[j] = has[j] and flowing(plastic, finite_yield, yielded, j)
     return out

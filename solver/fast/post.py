@@ -193,9 +193,9 @@ def project(m, tree, pws, pos, quat, asleep):
     prw, pa, pb, rot, inv_i, inertia_w, mu = pws
     nb, nj = len(pos), len(m[0])
     zeros = np.zeros((nb, 6))
-    seq, nseq = np.empty(len(order), np.int64), 0
+    seq, nseq, bone = np.empty(len(order), np.int64), 0, m[1]
     for i in order:
-        if not (asleep[i] if i < nb else asleep[m[1][i - nb]]):
+        if not (asleep[i] if i < nb else asleep[bone[i - nb]]):
             seq[nseq], nseq = i, nseq + 1
     for _ in range(PROJECT_ROUNDS):
         if nj == 0 or _awake_gap(m, pos, quat, asleep) <= PROJECT_TOL:
@@ -232,19 +232,19 @@ def rheology_update(m, opt, st, rw, n, lam, vel, rheo_joint, quat, asleep, out):
     q_sf0, yielded0, anchor0, avg0 = st[4], st[5], st[6], st[7]
     q_sf, yielded, anchor, avg, torque = out
     h, parent, bone = opt[0], m[0], m[1]
-    nj = len(parent)
+    nj, body_a, body_b, jac_a, jac_b, kind = len(parent), rw[0], rw[1], rw[2], rw[3], rw[11]
     torque[:, :] = 0.0
     w = np.zeros((nj, 3))
     slot = 0
     for i in range(n):
-        if rw[11][i] != KIND_RHEOLOGY:
+        if kind[i] != KIND_RHEOLOGY:
             continue
         j = rheo_joint[i]
-        a, b = rw[0][i], rw[1][i]
+        a, b = body_a[i], body_b[i]
         wa, wb = 0.0, 0.0
         for k in range(6):
-            wa += rw[2][i, k] * vel[a, k] if a >= 0 else 0.0
-            wb += rw[3][i, k] * vel[b, k] if b >= 0 else 0.0
+            wa += jac_a[i, k] * vel[a, k] if a >= 0 else 0.0
+            wb += jac_b[i, k] * vel[b, k] if b >= 0 else 0.0
         torque[j, slot % 3] = lam[i]
         w[j, slot % 3] = wa + wb
         slot += 1

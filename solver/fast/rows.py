@@ -103,8 +103,9 @@ def null_rows(rw, n, kind, j, count):
 
 @njit(cache=True, error_model="numpy")
 def is_null(rw, i):
-    """Row i is an empty slot (null_rows)."""
-    return rw[0][i] < 0 and rw[1][i] < 0
+    """Row i is an empty slot (null_rows).  Not ``and``: an array read from a tuple in an
+    and/or costs two uncancelled reference counts (~300 ns a call, numba 0.68)."""
+    return (rw[0][i] < 0) & (rw[1][i] < 0)
 
 
 @njit(cache=True, error_model="numpy")

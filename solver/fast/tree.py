@@ -221,12 +221,12 @@ def _coupling(i, p, nb, rw, rows, size, g):
     """g = K_ip = −J block between body node and row node (transposed when i is the body)."""
     body_is_p = i >= nb
     row_node = i if body_is_p else p
-    body = p if body_is_p else i
+    body, body_a, jac_a, jac_b = p if body_is_p else i, rw[0], rw[2], rw[3]
     for k in range(size[row_node]):
         r = rows[row_node, k]
-        on_a = rw[0][r] == body
+        on_a = body_a[r] == body
         for c in range(6):
-            v = -rw[2][r, c] if on_a else -rw[3][r, c]
+            v = -jac_a[r, c] if on_a else -jac_b[r, c]
             if body_is_p:
                 g[k, c] = v
             else:

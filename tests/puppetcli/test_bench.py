@@ -84,7 +84,7 @@ def test_peers_rows_sit_beside_ours():
     assert euler.vs_mujoco == 1.0 and euler.steps == ours.steps
     assert ours.vs_mujoco == pytest.approx(ours.steps_per_s / euler.steps_per_s)
     (line,) = bench.peer_summary(rows)
-    assert line.startswith("doll h=0.02: pgs") and "MuJoCo implicitfast" in line
+    assert line.startswith("doll h=0.02: pgs (fast)") and "MuJoCo implicitfast" in line
 
 
 def test_cli_peers_without_mujoco_carries_on(tmp_path, monkeypatch):
@@ -99,10 +99,9 @@ def test_cli_peers_without_mujoco_carries_on(tmp_path, monkeypatch):
         table = list(reader)
     assert reader.fieldnames == list(BenchRow.__dataclass_fields__)
     assert [(t["scene"], t["solver"], t["engine"]) for t in table] == [
-        ("doll", "pgs", "numpy"),
-        ("doll", "pgs", "fast"),
-        ("doll-joints", "pgs", "numpy"),
-        ("doll-joints", "pgs", "fast"),
+        (scene, "pgs", engine)
+        for scene in ("doll", "doll-joints")
+        for engine in ("numpy", "fast", "sim")
     ]
 
 
@@ -126,3 +125,30 @@ def test_doll_stages_cover_the_step():
     assert list(stages)[: len(STAGES)] == list(STAGES)
     assert all(v >= 0.0 for k, v in stages.items() if k in STAGES)
     assert stages["solve"] > 0.0 and stages["collision and contact/grip rows"] > 0.0
+
+
+def test_sim_engine_runs_the_same_scene_as_fast_step():
+    # The in-place Sim steps the same kernel on the same inputs: the same contacts and
+    # substeps, step for step, so their means over the run agree exactly.
+    rows = measure({"doll": bench.doll_scenes()["doll"]}, [0.02], ["auto"], 0.1, ("fast", "sim"))
+    fast, sim = _by(rows, "doll", "auto", "fast"), _by(rows, "doll", "auto", "sim")
+    assert sim.steps == fast.steps == 5 and sim.steps_per_s > 0
+    assert (sim.contacts, sim.substeps) == (fast.contacts, fast.substeps)
+    assert sim.contacts > 0
+
+
+def test_trials_run_round_by_round_and_keep_their_fastest_run():
+    calls = []
+
+    def trial(name, seconds):
+        def run():
+            calls.append(name)
+            t = seconds.pop(0)
+            return BenchRow("s", 0.01, name, "fast", 10, 1, t, 10 / t, 0.1 / t, math.nan)
+
+        return bench.Trial(len(seconds), run)
+
+    a, b = trial("a", [3.0, 1.0, 2.0]), trial("b", [2.0])
+    rows = bench._interleaved([a, b])
+    assert calls == ["a", "b", "a", "a"]
+    assert [r.seconds for r in rows] == [1.0, 2.0] and [r.repeats for r in rows] == [3, 1]
