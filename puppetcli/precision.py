@@ -64,6 +64,10 @@ QUICK_SETTINGS = [s for s in SETTINGS if s.name in ("pgs5", BASELINE, "direct", 
 STEPS_H = [0.001, 0.005, 0.02]
 QUICK_STEPS_H = [0.005, 0.02]
 ROW_SCENES = ("creep", "chain-1s", "chain-3s", "doll")  # the rows' scene names, by kind
+ROW_KIND = {"creep": "creep", "chain-1s": "chain", "chain-3s": "chain", "doll": "doll"}
+EQUAL_TIME = ("auto", "direct")  # settings given equal-time runs (equal_time_rows)
+GRID = 0.5  # s: every scene's sample times (creep 2, 6; chain 1, 3; doll 0.5, 1, 1.5) are multiples
+EQUAL_TIME_NOTE = "equal-time run"
 REFERENCE_H = {"chain": 0.0001, "doll": 0.0001}
 QUICK_REFERENCE_H = {"chain": 0.0005, "doll": 0.001}
 
@@ -167,6 +171,8 @@ def study(
         for h in steps_h:
             for s in settings:
                 rows += scene_rows(kind, s, h, repeats, reference_h)
+    if not quick:
+        rows += equal_time_rows(rows, settings, repeats, reference_h)
     if peers:
         from puppetcli.precision_peers import peer_rows
 
@@ -174,6 +180,45 @@ def study(
     order = {name: i for i, name in enumerate(ROW_SCENES)}
     rows.sort(key=lambda r: order.get(r.scene, len(order)))  # stable: one block per scene
     return with_time_ratios(rows)
+
+
+def equal_time_h(h_base: float, seconds_base: float, seconds: float) -> float | None:
+    """The step at which a setting that took ``seconds`` at h_base takes about the
+    baseline's ``seconds_base`` over the same simulated span (run time ∝ 1/h): h_base ·
+    seconds / seconds_base, rounded down to GRID/N so every sample time stays a step
+    boundary.  None when that is not finer than h_base (the setting is not faster)."""
+    if not (seconds > 0.0 and seconds_base > 0.0):
+        return None
+    h = GRID / math.ceil(GRID / (h_base * seconds / seconds_base) - 1e-9)
+    return h if h < h_base * (1.0 - 1e-9) else None
+
+
+def equal_time_rows(
+    rows: list[PrecisionRow], settings: list[Setting], repeats: int, reference_h: dict[str, float]
+) -> list[PrecisionRow]:
+    """Measured points at equal run time, so the verdict's "lower error at equal or lower
+    run time" compares runs, never an interpolated curve: each EQUAL_TIME setting that
+    was faster than the baseline at one of its steps runs again at the finer step that
+    spends about the baseline's time there (``equal_time_h``; judged on each scene's
+    longest row, its whole run).  Their note is EQUAL_TIME_NOTE."""
+    by_name = {s.name: s for s in settings}
+    longest: dict[tuple, PrecisionRow] = {}
+    for r in rows:
+        key = (ROW_KIND.get(r.scene), r.setting, r.h)
+        if math.isfinite(r.seconds) and (key not in longest or r.steps > longest[key].steps):
+            longest[key] = r
+    planned = {}
+    for (kind, name, h), r in longest.items():
+        base = longest.get((kind, BASELINE, h))
+        if name in EQUAL_TIME and name in by_name and base is not None:
+            h_eq = equal_time_h(h, base.seconds, r.seconds)
+            if h_eq is not None:
+                planned[(kind, name, h_eq)] = True
+    out = []
+    for kind, name, h_eq in planned:
+        got = scene_rows(kind, by_name[name], h_eq, repeats, reference_h)
+        out += [replace(r, note=r.note or EQUAL_TIME_NOTE) for r in got]
+    return out
 
 
 def format_table(rows: list[PrecisionRow]) -> str:

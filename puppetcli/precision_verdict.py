@@ -10,9 +10,11 @@ creep) must not "win" by the last digit.  Times are compared as measured (≤: "
 or lower run time"), so between settings of equal cost the verdict can go either way
 with the machine's timing noise; the line prints the time ratio so a reader can tell.
 Only measured points are compared: no curve is interpolated or extrapolated, so a
-claim never rests on a point nobody ran.  The winner of a scene is the setting that
-beats the most baseline points, ties broken by the larger geometric-mean error ratio
-e_b / e over the points it beats.
+claim never rests on a point nobody ran.  To compare at equal run time the study runs
+the faster settings again at the finer step that spends the baseline's time
+(``precision.equal_time_rows``); those are measured points like the others.  The
+winner of a scene is the setting that beats the most baseline points, ties broken by
+the larger geometric-mean error ratio e_b / e over the points it beats.
 
 The line also answers the dual question, the baseline's accuracy in less time
 (``as_accurate_for_less``), where "less" means below (1 − TIME_TIE) of the baseline's

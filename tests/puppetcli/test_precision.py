@@ -238,3 +238,31 @@ def test_cli_precision_quick_with_peers_missing(tmp_path, monkeypatch):
         assert f"verdict {scene}:" in result.output
     assert "stability h=0.05 ours" in result.output
     assert (tmp_path / "precision.csv").exists() and (tmp_path / "precision.png").stat().st_size
+
+
+def test_equal_time_step_spends_the_baselines_time_on_the_sample_grid():
+    # Run time ∝ 1/h over a fixed span: a setting twice as fast at 20 ms can afford
+    # 10 ms; 0.72× as fast at 1 ms, 0.5/696 s (the grid step just below 0.719 ms).
+    assert precision.equal_time_h(0.02, 1.0, 0.5) == pytest.approx(0.01, rel=1e-12)
+    h = precision.equal_time_h(0.001, 0.2435, 0.1751)
+    assert h == pytest.approx(0.5 / 696, rel=1e-12) and h <= 0.001 * 0.1751 / 0.2435
+    assert precision.equal_time_h(0.005, 1.0, 1.0) is None  # not faster: nothing to run
+    assert precision.equal_time_h(0.005, 1.0, 1.3) is None
+    for times in (scenes.DOLL_TIMES, scenes.CHAIN_TIMES, (scenes.T_LOAD, scenes.T_END)):
+        scenes.key_steps(h, times)  # every sample time stays a step boundary
+
+
+def test_equal_time_runs_are_measured_at_the_finer_step():
+    # A baseline point at 20 ms that took twice auto's time: auto runs again at 10 ms
+    # (a real run, noted), and creep's first-order error there is about half of 20 ms's.
+    auto = Setting("auto", "auto")
+
+    def row(setting, seconds, h=0.02):
+        return PrecisionRow("creep", setting, h, 300, seconds, NAN_, NAN_, 3.97e-4, "rad")
+
+    NAN_ = math.nan
+    got = precision.equal_time_rows([row(BASELINE, 1.0), row("auto", 0.5)], [auto], 1, {})
+    (r,) = got
+    assert (r.scene, r.setting, r.note) == ("creep", "auto", precision.EQUAL_TIME_NOTE)
+    assert r.h == pytest.approx(0.01) and r.steps == 600
+    assert 0.5 * 3.97e-4 < r.error < 0.6 * 3.97e-4
