@@ -54,7 +54,7 @@ MIN_TIMED_STEPS = {"fast": 3000, "sim": 3000, "numpy": 100, "mujoco": 3000}
 MIN_REPEATS = {"fast": 5, "sim": 5, "numpy": 1, "mujoco": 5}
 MUJOCO_INTEGRATORS = ("Euler", "implicitfast")
 NAN = math.nan
-INSTALL_HINT = "peers: mujoco is not installed (pip install '.[bench]' to compare with MuJoCo)"
+INSTALL_HINT = "peers: mujoco is not installed (pip install -e '.[bench]' to compare with MuJoCo)"
 
 
 @dataclass(frozen=True)

@@ -70,7 +70,7 @@ SOLVER_CHOICES = [*SOLVERS, "reference"]
     "--peers",
     is_flag=True,
     help="Also measure MuJoCo on the same rig and scene in the same run (needs the "
-    "optional mujoco package: pip install '.[bench]').",
+    "optional mujoco package: pip install -e '.[bench]').",
 )
 @click.option(
     "--precision",

@@ -93,7 +93,7 @@ def test_cli_peers_without_mujoco_carries_on(tmp_path, monkeypatch):
     args = ["--peers", "--h", "0.02", "--seconds", "0.02", "--solver", "pgs", "--csv", str(out)]
     result = CliRunner().invoke(command, args)
     assert result.exit_code == 0, result.output
-    assert result.output.count("pip install '.[bench]'") == 1
+    assert result.output.count("pip install -e '.[bench]'") == 1
     with open(out, newline="") as f:
         reader = csv.DictReader(f)
         table = list(reader)

@@ -233,7 +233,7 @@ def test_cli_precision_quick_with_peers_missing(tmp_path, monkeypatch):
     args = ["--precision", "--quick", "--peers", "--out", str(tmp_path)]
     result = CliRunner().invoke(command, args)
     assert result.exit_code == 0, result.output
-    assert "pip install '.[bench]'" in result.output and "mujoco-" not in result.output
+    assert "pip install -e '.[bench]'" in result.output and "mujoco-" not in result.output
     for scene in precision.ROW_SCENES:
         assert f"verdict {scene}:" in result.output
     assert "stability h=0.05 ours" in result.output
