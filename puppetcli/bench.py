@@ -3,7 +3,7 @@
 Speed is reported as ratios measured in the same run, never as an absolute pass/fail:
 against the paper's setting on the numpy step (PGS, 15 iterations, warm start; the
 readable reference implementation, ``solver.step.step``) and, with ``--peers``, against
-MuJoCo on the same rig and scene (``puppetcli.peers.doll_speed``).  Every solver runs
+MuJoCo on the same rig and scene (``puppetcli.peers.doll_timer``).  Every solver runs
 on the compiled step (``solver.fast.fast_step``, what the CLI uses); the numpy step is
 measured only for the baseline unless asked, since it is ~40× slower and its other
 solvers say nothing about the CLI.
@@ -13,7 +13,7 @@ the CLI's script runner); ``sim`` is ``solver.fast.sim.Sim``, the same kernel st
 its own arrays in place (as MuJoCo's mj_step steps mjData: the loop for driving a
 device); ``numpy`` is ``solver.step.step``.
 
-The scene (``time_run``): the doll standing on its stand, its left forearm's end
+The scene (``run_timer``): the doll standing on its stand, its left forearm's end
 gripped (position only, ``GRIP``) and lifted by ``LIFT`` along a minimum-jerk path over
 ``seconds``.  Each configuration first takes a few untimed steps (JIT compilation,
 caches), then is timed from rest ``repeats`` times; the best run counts (other
@@ -30,6 +30,7 @@ import csv
 import io
 import math
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -43,7 +44,7 @@ from solver.fast import fast_step
 from solver.fast.sim import Sim
 from solver.grip import make_coupling
 from solver.model import Model, build_model
-from solver.state import StepInput, initial_state
+from solver.state import StepInput, StepReport, initial_state
 from solver.step import step
 
 RIGS = Path(__file__).resolve().parent.parent / "rigs"
@@ -110,7 +111,25 @@ GRIP = dict(  # the script's default gains, position-only (as for pulls)
 LIFT = np.array([0.0, 0.15, 0.15])  # m: where the grip takes the forearm's end
 GRIP_BONE = "forearm_l"
 
-ENGINES = {"numpy": step, "fast": fast_step, "sim": None}  # sim: time_run's own loop
+
+class _Stepping:
+    """A run of ``step_fn`` (the numpy step or fast_step) from rest with Sim's ``step``,
+    so one loop times every engine (the method call costs ~0.1 µs a step)."""
+
+    def __init__(self, model: Model, step_fn) -> None:
+        self.model, self.step_fn, self.state = model, step_fn, initial_state(model)
+
+    def step(self, inp: StepInput) -> StepReport:
+        self.state, report = self.step_fn(self.model, self.state, inp)
+        return report
+
+
+ENGINES = {
+    "numpy": lambda model: _Stepping(model, step),
+    "fast": lambda model: _Stepping(model, fast_step),
+    "sim": Sim,
+}
+"""engine → a run from rest of a model (an object with ``step(inp) → StepReport``)."""
 
 
 def grip_inputs(model: Model, lift: float, steps: int) -> list[StepInput]:
@@ -139,39 +158,24 @@ def repeats_for(steps: int, engine: str) -> int:
     return max(MIN_REPEATS[engine], math.ceil(MIN_TIMED_STEPS[engine] / max(steps, 1)))
 
 
-def time_run(model: Model, seconds: float, engine: str = "fast", repeats: int = 1) -> Timing:
-    """The grip scene (``grip_inputs``, lift over ``seconds``) from rest, best of
-    ``repeats`` timed runs after WARMUP_STEPS untimed steps."""
-    timed = run_timer(model, seconds, engine)
-    return min((timed() for _ in range(repeats)), key=lambda t: t.seconds)
-
-
 def run_timer(model: Model, seconds: float, engine: str = "fast"):
-    """A function that times one run of ``time_run``'s scene from rest on ``engine`` and
-    returns its Timing (the warm-up and the inputs are made once, here)."""
-    step_fn = ENGINES[engine] or fast_step
-    state = initial_state(model)
-    for _ in range(WARMUP_STEPS):
-        state, _ = step_fn(model, state)
+    """A function that times one run of the grip scene (``grip_inputs``, lift over
+    ``seconds``) from rest on ``engine`` and returns its Timing.  Made once, here: the
+    inputs, and WARMUP_STEPS untimed steps of them (compiling, filling caches)."""
     n = max(1, round(seconds / model.options.h))
     inputs = grip_inputs(model, seconds, n)
+    start_run = ENGINES[engine]
+    warm = start_run(model)
+    for inp in inputs[:WARMUP_STEPS]:
+        warm.step(inp)
 
     def timed() -> Timing:
-        contacts, substeps = 0, 0
-        if engine == "sim":
-            sim = Sim(model)
-            start = time.perf_counter()
-            for inp in inputs:
-                report = sim.step(inp)
-                contacts += report.contacts
-                substeps += report.substeps
-        else:
-            state = initial_state(model)
-            start = time.perf_counter()
-            for inp in inputs:
-                state, report = step_fn(model, state, inp)
-                contacts += report.contacts
-                substeps += report.substeps
+        sim, contacts, substeps = start_run(model), 0, 0
+        start = time.perf_counter()
+        for inp in inputs:
+            report = sim.step(inp)
+            contacts += report.contacts
+            substeps += report.substeps
         return Timing(n, time.perf_counter() - start, contacts / n, substeps / n)
 
     return timed
@@ -209,7 +213,7 @@ class Trial:
     (``_interleaved``), and the fastest counts.  ``row`` is final when no run is due."""
 
     repeats: int
-    run: object  # () -> BenchRow, or None when the row is already final
+    run: Callable[[], BenchRow] | None  # None: the row is already final
     row: BenchRow | None = None
 
 
@@ -238,7 +242,7 @@ def _failed(name: str, h: float, solver: str, engine: str, note: str) -> BenchRo
 
 
 def _ours(name: str, model: Model, h: float, solver: str, engine: str, seconds: float) -> Trial:
-    """The trial of one of our (solver, engine) on the grip scene (``time_run``)."""
+    """The trial of one of our (solver, engine) on the grip scene (``run_timer``)."""
     if solver == "direct" and (model.has_collision or model.has_limits):
         return Trial(
             0, None, _failed(name, h, solver, engine, "n/a: direct needs two-sided rows only")
@@ -247,14 +251,20 @@ def _ours(name: str, model: Model, h: float, solver: str, engine: str, seconds: 
         return Trial(0, None, _failed(name, h, solver, engine, "n/a: numpy only"))
     m = model.with_options(h=h, method=solver, iterations=15, warm_start=True)
     span = seconds if solver != "reference" else min(seconds, 20 * h)
-    timer = []  # made at the first run, inside the trial's error handling
+
+    def failed(exc: SimulationError) -> BenchRow:
+        return _failed(name, h, solver, engine, f"failed: {str(exc)[:60]}")
+
+    try:
+        timed = run_timer(m, span, engine)
+    except SimulationError as exc:
+        return Trial(0, None, failed(exc))
 
     def run() -> BenchRow:
         try:
-            timer[:] = timer or [run_timer(m, span, engine)]
-            t = timer[0]()
+            t = timed()
         except SimulationError as exc:
-            return _failed(name, h, solver, engine, f"failed: {str(exc)[:60]}")
+            return failed(exc)
         return BenchRow(name, h, solver, engine, t.steps, 1, t.seconds, t.steps / t.seconds,
                         t.steps * h / t.seconds, NAN, contacts=t.contacts,
                         substeps=t.substeps)  # fmt: skip
@@ -264,19 +274,18 @@ def _ours(name: str, model: Model, h: float, solver: str, engine: str, seconds: 
 
 def _mujoco(h: float, seconds: float, integrator: str) -> Trial:
     """The trial of MuJoCo with ``integrator`` on the same doll scene
-    (``puppetcli.peers.doll_speed``); engine "mujoco"."""
+    (``puppetcli.peers.doll_timer``); engine "mujoco"."""
     from puppetcli import peers
 
     n = max(1, round(seconds / h))
-    if n < peers.WARMUP_STEPS:  # doll_speed warms up on the run's own inputs
+    if n < peers.WARMUP_STEPS:  # doll_timer warms up on the run's own inputs
         note = f"n/a: MuJoCo's run needs ≥ {peers.WARMUP_STEPS} steps"
         return Trial(0, None, _failed("doll", h, integrator.lower(), "mujoco", note))
 
-    timer = []
+    timed = peers.doll_timer(h, seconds, integrator)
 
     def run() -> BenchRow:
-        timer[:] = timer or [peers.doll_timer(h, seconds, integrator)]
-        r = timer[0]()
+        r = timed()
         return BenchRow("doll", h, integrator.lower(), "mujoco", r["steps"], 1, r["seconds"],
                         r["steps_per_s"], r["steps"] * h / r["seconds"], NAN,
                         contacts=r["contacts"],

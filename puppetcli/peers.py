@@ -33,10 +33,10 @@ import time
 from contextlib import contextmanager
 from dataclasses import replace
 from functools import lru_cache
-from pathlib import Path
 
 import numpy as np
 
+from puppetcli.bench import GRIP, GRIP_BONE, LIFT
 from puppetcli.peers_mjcf import (
     Peer,
     PeerGrip,
@@ -47,18 +47,12 @@ from puppetcli.peers_mjcf import (
     peer_tails,
 )
 from puppetcli.pointer import Motion
-from puppetcli.rigfile import load_rig
+from puppetcli.precision_scenes import CHAIN_TIMES, DOLL_LIFT, DOLL_TIMES, chain_model, doll_model
 from solver import quat
-from solver.model import Model, build_model
 
-RIGS = Path(__file__).resolve().parent.parent / "rigs"
-GRIP_K, GRIP_D, GRIP_LIMIT = 2000.0, 40.0, 300.0  # puppetcli.bench.GRIP, position-only
-LIFT = np.array([0.0, 0.15, 0.15])  # m: where the grip takes the forearm's end
-GRIP_BONE = "forearm_l"
+GRIP_K, GRIP_D, GRIP_LIMIT = GRIP["stiffness"], GRIP["damping"], GRIP["force_limit"]
 WARMUP_STEPS = 5
 REFERENCE_H = 5e-5
-CHAIN_TIMES = (1.0, 3.0)
-DOLL_LIFT, DOLL_TIMES = 1.0, (0.5, 1.0, 1.5)
 _BAD_STATE = ("mjWARN_BADQPOS", "mjWARN_BADQVEL", "mjWARN_BADQACC")
 
 
@@ -155,17 +149,6 @@ def run(peer: Peer, steps: int, record=None, at=()) -> tuple[float, float, list]
     return wall, ncon / max(steps, 1), out
 
 
-def chain_model() -> Model:
-    """rigs/chain.yaml without ground or self-collision (as puppetcli.precision)."""
-    spec = load_rig(RIGS / "chain.yaml")
-    bones = tuple(replace(b, collide=False) for b in spec.bones)
-    return build_model(replace(spec, ground=None, bones=bones))
-
-
-def doll_model() -> Model:
-    return build_model(load_rig(RIGS / "doll.yaml"))
-
-
 def doll_grip_peer(
     h: float, lift: float, steps: int, integrator: str = "Euler", offset=(0.0, 0.0, 0.0)
 ) -> Peer:
@@ -183,23 +166,11 @@ def doll_grip_peer(
     return drive(build_peer(model, h, integrator, grip), motion, grip, steps)
 
 
-def doll_speed(
-    h: float,
-    seconds: float,
-    integrator: str = "Euler",
-    repeats: int = 3,
-    offset=(0.0, 0.0, 0.0),
-) -> dict:
-    """Steps/s of MuJoCo on the bench's doll scene (``puppetcli.bench.time_run``): the
-    grip lifts forearm_l's end over ``seconds``.  A few untimed steps first, then the
-    best of ``repeats`` timed runs from rest (only the mj_step loop is timed)."""
-    timed = doll_timer(h, seconds, integrator, offset)
-    return min((timed() for _ in range(repeats)), key=lambda r: r["seconds"])
-
-
 def doll_timer(h: float, seconds: float, integrator: str = "Euler", offset=(0.0, 0.0, 0.0)):
-    """A function that times one run of ``doll_speed``'s scene from rest and returns its
-    figures (the peer is built and warmed up once, here)."""
+    """A function that times one run of the bench's doll scene (``puppetcli.bench.
+    run_timer``: the grip lifts forearm_l's end over ``seconds``) from rest and returns
+    its figures, steps/s among them; only the mj_step loop is timed.  The peer is built
+    and takes a few untimed steps once, here."""
     n = max(1, round(seconds / h))
     peer = doll_grip_peer(h, seconds, n, integrator, offset)
     run(peer, WARMUP_STEPS)

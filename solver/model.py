@@ -14,13 +14,18 @@ the identity, and joint rotation = log(q_parent⁻¹ ⊗ q_child).
 
 from __future__ import annotations
 
+import weakref
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
+from typing import TypeVar
 
 import numpy as np
 
 from solver import collide, quat
 from solver.massprops import shape_frame, shape_inertia_local, world_inertia
 from solver.spec import RigSpec, ShapeSpec
+
+T = TypeVar("T")
 
 SHAPE_CODE = {"sphere": 1, "capsule": 2, "box": 3}
 
@@ -362,3 +367,15 @@ def _geometry(
             body_movable=movable,
         )  # fmt: skip
     return collide.Geometry(**arrays, pair_a=pair_a, pair_b=pair_b)
+
+
+def kept_with(model: Model, store: dict, build: Callable[[], T], key=None) -> T:
+    """store[key] (key: id(model) unless given), made by ``build()`` on first use and
+    dropped when ``model`` is collected: what is derived from a frozen model never
+    changes, and an id is not reused while its model lives."""
+    key = id(model) if key is None else key
+    got = store.get(key)
+    if got is None:
+        got = store[key] = build()
+        weakref.finalize(model, store.pop, key, None)
+    return got

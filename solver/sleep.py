@@ -31,12 +31,11 @@ one, so both sleep and wake identically.
 from __future__ import annotations
 
 import math
-import weakref
 
 import numpy as np
 from numba import njit
 
-from solver.model import Model
+from solver.model import Model, kept_with
 
 _ISLANDS: dict[int, np.ndarray] = {}
 
@@ -44,12 +43,7 @@ _ISLANDS: dict[int, np.ndarray] = {}
 def body_islands(model: Model) -> np.ndarray:
     """(nb,) int64: each movable body's island (0, 1, …), −1 for immovable bodies; kept
     while ``model`` lives."""
-    got = _ISLANDS.get(id(model))
-    if got is None:
-        got = _components(model)
-        _ISLANDS[id(model)] = got
-        weakref.finalize(model, _ISLANDS.pop, id(model), None)
-    return got
+    return kept_with(model, _ISLANDS, lambda: _components(model))
 
 
 def _components(model: Model) -> np.ndarray:

@@ -20,16 +20,16 @@ h = 50 ms that is one; a light rope under its own weight at 5 ms needs two.
 from __future__ import annotations
 
 import math
-import weakref
 from collections.abc import Callable
 from dataclasses import replace
+from functools import partial
 
 import numpy as np
 from numba import njit
 
 from solver import quat
 from solver.grip import Pointer
-from solver.model import Model
+from solver.model import Model, kept_with
 from solver.state import State, StepInput, StepReport
 
 SAFE_RATE = 2.0
@@ -126,13 +126,8 @@ _SUB_MODELS: dict[tuple[int, int], Model] = {}
 
 def sub_model(model: Model, n: int) -> Model:
     """``model`` at step h/n that never subdivides again (kept while ``model`` lives)."""
-    key = (id(model), n)
-    sub = _SUB_MODELS.get(key)
-    if sub is None:
-        sub = model.with_options(h=model.options.h / n, max_substeps=1)
-        _SUB_MODELS[key] = sub
-        weakref.finalize(model, _SUB_MODELS.pop, key, None)
-    return sub
+    build = partial(model.with_options, h=model.options.h / n, max_substeps=1)
+    return kept_with(model, _SUB_MODELS, build, (id(model), n))
 
 
 def pointer_at(ptr: Pointer | None, before_end: float) -> Pointer | None:

@@ -34,7 +34,6 @@ Tuple layouts:
 
 from __future__ import annotations
 
-import weakref
 from collections import deque
 from dataclasses import dataclass, field
 
@@ -42,7 +41,7 @@ import numpy as np
 
 from solver.fast.flat import flatten
 from solver.fast.kernel import STAGES
-from solver.model import Model
+from solver.model import Model, kept_with
 from solver.sleep import body_islands
 
 METHODS = {"auto": 0, "pgs": 1, "direct": 2, "hybrid": 3}
@@ -84,12 +83,7 @@ _CACHE: dict[int, FastModel] = {}
 
 def fast_model(model: Model) -> FastModel:
     """The packed form of ``model``, built on first use and dropped with the model."""
-    fm = _CACHE.get(id(model))
-    if fm is None:
-        fm = pack(model)
-        _CACHE[id(model)] = fm
-        weakref.finalize(model, _CACHE.pop, id(model), None)
-    return fm
+    return kept_with(model, _CACHE, lambda: pack(model))
 
 
 def _c(x, dtype=float) -> np.ndarray:

@@ -10,7 +10,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from puppetcli import peers
+from puppetcli import peers, precision_scenes
 from puppetcli.peers import PeerGrip, build_peer, drive, peer_tails, run
 from puppetcli.pointer import Motion, pointer_over_step
 from puppetcli.rigfile import load_rig
@@ -41,15 +41,6 @@ def test_importing_peers_does_not_import_mujoco():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "False"
     assert peers.mujoco_version() == mujoco.__version__
-
-
-def test_scene_constants_are_the_benchs():
-    from puppetcli import bench
-
-    grip = bench.GRIP
-    ours = (grip["stiffness"], grip["damping"], grip["force_limit"])
-    assert ours == (peers.GRIP_K, peers.GRIP_D, peers.GRIP_LIMIT)
-    assert grip["position_only"] and np.array_equal(peers.LIFT, bench.LIFT)
 
 
 def test_doll_masses_inertias_and_anchors_are_ours():
@@ -154,7 +145,7 @@ CROSS_T, CROSS_TIMES = 0.3, np.arange(1, 7) * 0.05
 
 
 def _chain(rheology):
-    spec = load_rig(peers.RIGS / "chain.yaml")
+    spec = load_rig(precision_scenes.RIGS / "chain.yaml")
     bones = tuple(replace(b, rheology=rheology, collide=False) for b in spec.bones)
     return build_model(replace(spec, ground=None, bones=bones))
 
@@ -230,6 +221,6 @@ def test_stability_reports_joint_anchors_held_and_the_lift():
     assert 0.0 < out["grip_rise"] < peers.LIFT[1]  # Voigt joints resist part of the lift
 
 
-def test_doll_speed_runs_the_bench_step_count():
-    out = peers.doll_speed(0.01, 0.05, repeats=1)
+def test_doll_timer_runs_the_bench_step_count():
+    out = peers.doll_timer(0.01, 0.05)()
     assert out["steps"] == 5 and out["steps_per_s"] > 0 and not out["diverged"]
