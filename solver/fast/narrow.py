@@ -22,6 +22,7 @@ from solver.fast.kin import add, clip, cross, dot, matvec, neg, norm, put, scale
 
 EPS = 1e-12
 SAME_POINT = 1e-7
+EARLY_OUT = 1e-6  # m: slack of the exact early-outs of segment_segment and segment_box
 
 
 @njit(cache=True, error_model="numpy")
@@ -114,11 +115,19 @@ def segment_param(p1, e1, p2, e2):
 
 @njit(cache=True, error_model="numpy")
 def segment_segment(ca, da, la, ra, cb_, db, lb, rb, margin, ctx, cb, n):
-    """Sphere/capsule a against sphere/capsule b: 0 closest points, 1–2 overlap ends."""
+    """Sphere/capsule a against sphere/capsule b: 0 closest points, 1–2 overlap ends.
+
+    Feature 0 is the closest pair of points, so when even it is farther than the margin
+    no feature can be kept and the pair is left before the other two are made.  The
+    slack covers rounding and segment_param's near-parallel branch (sin²θ ≤ 10⁻¹²: s = 0,
+    at most 2·la·θ ≤ 2·10⁻⁶·la from the closest point)."""
     pb = sub(cb_, scale(lb, db))
     eb = scale(2.0 * lb, db)
     s = segment_param(sub(ca, scale(la, da)), scale(2.0 * la, da), pb, eb)
     u0 = (2.0 * s - 1.0) * la
+    slack = EARLY_OUT * (1.0 + 2.0 * (la + lb))
+    if _segment_distance(add(ca, scale(u0, da)), pb, eb) - (ra + rb) > margin + slack:
+        return n
     mid, spread = dot(sub(cb_, ca), da), lb * abs(dot(db, da))
     lo = clip(mid - spread, -la, la)
     hi = clip(mid + spread, -la, la)
@@ -144,6 +153,14 @@ def segment_segment(ca, da, la, ra, cb_, db, lb, rb, margin, ctx, cb, n):
         if keep:
             n = emit(cb, n, ctx, f, point, normal, depth)
     return n
+
+
+@njit(cache=True, error_model="numpy")
+def _segment_distance(x, p, e):
+    """Distance from point x to the segment p + t·e, t ∈ [0, 1] (as segment_segment's
+    features measure it)."""
+    t = clip(safe_div(dot(sub(x, p), e), dot(e, e)), 0.0, 1.0)
+    return norm(sub(add(p, scale(t, e)), x))
 
 
 @njit(cache=True, error_model="numpy")
@@ -219,7 +236,14 @@ def deepest_param(p0, dp, half):
 
 @njit(cache=True, error_model="numpy")
 def segment_box(cbox, rot, s, half, c, d, lseg, r, margin, ctx, cb, n):
-    """Segment c ± lseg·d of radius r (first) against box s: 0 deepest point, 1–2 ends."""
+    """Segment c ± lseg·d of radius r (first) against box s: 0 deepest point, 1–2 ends.
+
+    The box's distance φ is 1-Lipschitz and every point of the segment is within lseg of
+    its middle, so φ ≥ φ(middle) − lseg along it: when that bound is farther than the
+    margin (by more than EARLY_OUT) no feature can be kept, and the 37-candidate search
+    is skipped."""
+    if box_sdf(tmatvec(rot, s, sub(c, cbox)), half) - lseg - r > margin + EARLY_OUT:
+        return n
     p0 = tmatvec(rot, s, sub(sub(c, scale(lseg, d)), cbox))
     dp = tmatvec(rot, s, scale(2.0 * lseg, d))
     t0 = deepest_param(p0, dp, half)

@@ -10,8 +10,9 @@ import pytest
 import scipy.linalg
 from rigbuild import chain, rheology
 
-from solver import collide, quat
+from solver import collide, collide_box, collide_segment, quat
 from solver.fast.contacts import collide_pointer, collide_scene, world_shapes
+from solver.fast.narrow import segment_box, segment_segment
 from solver.fast.pack import pack
 from solver.fast.rows import row_arrays
 from solver.fast.tree import dense_solve, node_rows, tree_solve
@@ -88,6 +89,96 @@ def test_narrow_phase_equals_numpy_collide(seed):
             model.with_options(contact_margin=0.01), state, centre_p, radius
         )
         assert_same_contacts(expected, cb, n)
+
+
+def _buffers(k: int = 8) -> tuple:
+    """Contact buffers (body_a, body_b, point, normal, depth, friction, key) for k contacts."""
+    z = np.zeros
+    return (z(k, np.int64), z(k, np.int64), z((k, 3)), z((k, 3)), z(k), z(k), z(k, np.int64))
+
+
+CTX = (0, 1, 0.5, 1.0, 0)  # a narrow kernel's pair: bodies 0, 1, friction, sign, key base
+
+
+def _tup(x):
+    """A vector as the compiled kernels take it (a tuple of floats), a scalar as a float."""
+    return tuple(float(v) for v in x) if np.ndim(x) else float(x)
+
+
+def _unit_rows(rng, k: int) -> np.ndarray:
+    v = rng.normal(size=(k, 3))
+    return v / np.linalg.norm(v, axis=1, keepdims=True)
+
+
+def _assert_features(found: tuple, cb: tuple, n: int) -> None:
+    """The compiled kernel's contacts (features in order, key = feature) are numpy's kept ones."""
+    point, normal, depth, keep = (x[0] for x in found)
+    kept = np.flatnonzero(keep)
+    assert np.array_equal(cb[6][:n], kept)
+    for got, want in ((cb[2], point), (cb[3], normal), (cb[4], depth)):
+        assert np.abs(got[:n] - want[kept]).max(initial=0.0) < 1e-12
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_narrow_early_outs_keep_every_contact(seed):
+    """segment_segment and segment_box leave a pair early when its closest points (the
+    box: a Lipschitz bound) are beyond the margin; on pairs placed so their distance
+    straddles the margin — near-parallel segments, spheres, segments up to 10 m long —
+    they keep exactly numpy's contacts (solver.collide_segment / collide_box)."""
+    rng = np.random.default_rng(seed)
+    margin, k = 0.01, 400
+    da, db = _unit_rows(rng, k), _unit_rows(rng, k)
+    near_parallel = rng.random(k) < 0.25
+    db[near_parallel] = da[near_parallel] + 1e-7 * _unit_rows(rng, near_parallel.sum())
+    length = 10.0 ** rng.uniform(-2, 1, size=(k, 2))
+    length[rng.random(k) < 0.1, 0] = 0.0  # spheres
+    radius = rng.uniform(0.01, 0.1, size=(k, 2))
+    ca = rng.uniform(-0.5, 0.5, size=(k, 3))
+    kept_some = skipped = 0
+    for i in range(k):
+        la, lb, ra, rb = length[i, 0], length[i, 1], radius[i, 0], radius[i, 1]
+        # b's centre at a distance from a's closest point that straddles the margin
+        side = np.cross(da[i], db[i])
+        side = side / np.linalg.norm(side) if np.linalg.norm(side) > 1e-9 else _unit_rows(rng, 1)[0]
+        gap = ra + rb + margin + rng.uniform(-0.02, 0.02)
+        cb_ = ca[i] + rng.uniform(-la, la) * da[i] + gap * side
+        args = (ca[i], da[i], la, ra, cb_, db[i], lb, rb)
+        buffers = _buffers()
+        n = segment_segment(*(_tup(a) for a in args), margin, CTX, buffers, 0)
+        found = collide_segment.segment_segment(*(np.array([a]) for a in args), margin)
+        _assert_features(found, buffers, n)
+        kept_some += n > 0
+        skipped += n == 0
+    assert kept_some > k // 5 and skipped > k // 5  # both sides of the margin were tried
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_segment_box_early_out_keeps_every_contact(seed):
+    rng = np.random.default_rng(seed)
+    margin, k = 0.01, 400
+    kept_some = skipped = 0
+    for _ in range(k):
+        half = 10.0 ** rng.uniform(-2, 0.5, size=3)
+        q = quat.normalize(rng.normal(size=4))
+        rot = quat.matrix(q)
+        cbox = rng.uniform(-0.5, 0.5, 3)
+        d = _unit_rows(rng, 1)[0]
+        lseg, r = 10.0 ** rng.uniform(-2, 1) * (rng.random() > 0.1), rng.uniform(0.01, 0.1)
+        # the segment's middle just outside a face, at a distance straddling its reach
+        axis = rng.integers(3)
+        local = rng.uniform(-1, 1, 3) * half
+        local[axis] = np.sign(rng.normal()) * (half[axis] + r + margin + rng.uniform(-0.02, 0.2))
+        c = cbox + rot @ local
+        buffers = _buffers()
+        n = segment_box(_tup(cbox), rot[None], 0, _tup(half), _tup(c), _tup(d), lseg, r, margin,
+                        CTX, buffers, 0)  # fmt: skip
+        args = (cbox, rot, half, c, d, lseg, r)
+        point, normal, depth, keep = collide_box.segment_box(*(np.array([a]) for a in args), margin)
+        found = point, -normal, depth, keep  # numpy's is the box's; the kernel's box-ward
+        _assert_features(found, buffers, n)
+        kept_some += n > 0
+        skipped += n == 0
+    assert kept_some > k // 10 and skipped > k // 10
 
 
 def test_box_box_within_reach_is_declined():
