@@ -104,11 +104,19 @@ def qrotate(q, v):
 
 @njit(cache=True, error_model="numpy")
 def qexp(v):
-    """Unit quaternion of a rotation vector (Taylor series of sin(θ/2)/θ near 0)."""
+    """Unit quaternion of a rotation vector.  Below θ/2 = 10⁻³ (a step's rotation at
+    h = 1 ms and |ω| < 2 rad/s) cos(θ/2) and sin(θ/2)/θ are their Taylor series to x⁴: the
+    first dropped terms (x⁶/6!, x⁶/(2·7!)) are < 1.4·10⁻²¹, far below rounding, so these
+    are the numbers sin and cos give, at a fraction of their cost."""
     angle = norm(v)
     half = 0.5 * angle
-    k = 0.5 - angle * angle / 48.0 if angle < 1e-8 else math.sin(half) / angle
-    return (math.cos(half), k * v[0], k * v[1], k * v[2])
+    if half < 1e-3:
+        x2 = half * half
+        c = 1.0 - x2 * (0.5 - x2 * (1.0 / 24.0))
+        k = 0.5 - x2 * (1.0 / 12.0 - x2 * (1.0 / 240.0))
+    else:
+        c, k = math.cos(half), math.sin(half) / angle
+    return (c, k * v[0], k * v[1], k * v[2])
 
 
 @njit(cache=True, error_model="numpy")
