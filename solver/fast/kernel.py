@@ -165,15 +165,24 @@ def regularize(rw, n, resp_a, resp_b, eps):
 
 @njit(cache=True, error_model="numpy")
 def warm_start(opt, iopt, st, rw, n):
-    """Last step's λ of rows with the same key (sorted keys, binary search) × factor."""
+    """Last step's λ of rows with the same key × factor.  The keys are sorted and the rows
+    are made nearly in key order, so the key after the last one found is tried first
+    (a binary search otherwise)."""
     lam = np.zeros(n)
-    keys, values = st[8], st[9]
+    keys, values, row_key = st[8], st[9], rw[10]
     if not iopt[2] or len(keys) == 0:
         return lam
+    at = -1  # where the last key was found
     for i in range(n):
-        at = min(np.searchsorted(keys, rw[10][i]), len(keys) - 1)
-        if keys[at] == rw[10][i]:
-            lam[i] = opt[11] * values[at]
+        key = row_key[i]
+        if at + 1 < len(keys) and keys[at + 1] == key:
+            at += 1
+        else:
+            found = min(np.searchsorted(keys, key), len(keys) - 1)
+            if keys[found] != key:
+                continue
+            at = found
+        lam[i] = opt[11] * values[at]
     return lam
 
 
