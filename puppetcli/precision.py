@@ -63,8 +63,8 @@ SETTINGS = [
 QUICK_SETTINGS = [s for s in SETTINGS if s.name in ("pgs5", BASELINE, "direct", "auto", "hybrid15")]
 STEPS_H = [0.001, 0.005, 0.02]
 QUICK_STEPS_H = [0.005, 0.02]
-ROW_SCENES = ("creep", "chain-1s", "chain-3s", "doll")  # the rows' scene names, by kind
 ROW_KIND = {"creep": "creep", "chain-1s": "chain", "chain-3s": "chain", "doll": "doll"}
+ROW_SCENES = tuple(ROW_KIND)  # the rows' scene names, in table order
 EQUAL_TIME = ("auto", "direct")  # settings given equal-time runs (equal_time_rows)
 GRID = 0.5  # s: every scene's sample times (creep 2, 6; chain 1, 3; doll 0.5, 1, 1.5) are multiples
 EQUAL_TIME_NOTE = "equal-time run"
@@ -207,13 +207,13 @@ def equal_time_rows(
         key = (ROW_KIND.get(r.scene), r.setting, r.h)
         if math.isfinite(r.seconds) and (key not in longest or r.steps > longest[key].steps):
             longest[key] = r
-    planned = {}
+    planned = []
     for (kind, name, h), r in longest.items():
         base = longest.get((kind, BASELINE, h))
         if name in EQUAL_TIME and name in by_name and base is not None:
             h_eq = equal_time_h(h, base.seconds, r.seconds)
-            if h_eq is not None:
-                planned[(kind, name, h_eq)] = True
+            if h_eq is not None and (kind, name, h_eq) not in planned:
+                planned.append((kind, name, h_eq))
     out = []
     for kind, name, h_eq in planned:
         got = scene_rows(kind, by_name[name], h_eq, repeats, reference_h)

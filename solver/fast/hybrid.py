@@ -97,12 +97,10 @@ def _schur(rw, its, nu, seq, nseq, parent, nb, size, tw, movable, x):
 
 
 @njit(cache=True, error_model="numpy")
-def _solve_exact(seq, nseq, parent, nb, rw, vel, rows, size, tw, movable, lam, out, ready):
-    """λ of the forest's rows and out = vel + y, with v_free replaced by ``vel``; ready:
-    tw[2] already holds the right-hand sides of ``vel`` (init_nodes made them)."""
+def _solve_exact(seq, nseq, parent, nb, movable, rows, size, tw, vel, lam, out):
+    """λ of the forest's rows and out = vel + y, with v_free replaced by ``vel``, from
+    the right-hand sides of ``vel`` in tw[2] (init_nodes or init_rhs made them)."""
     x = tw[2]
-    if not ready:
-        init_rhs(seq, nseq, nb, rw, vel, rows, size, x)
     every = np.zeros(len(parent), np.int64)
     tree_substitute(seq, nseq, parent, nb, size, tw, x, every, 0, every, 0)
     for b in range(nb):
@@ -161,7 +159,7 @@ def _round(m, tree, ws, opt, rw, n, lam, vel_p, its, nu, grips, lam0, iters, asl
     vel = np.empty_like(vel_p)
     if not tree_factor(seq, nseq, parent, nb, rw, rows, size, tw):
         return False, vel, 0, 0.0
-    _solve_exact(seq, nseq, parent, nb, rw, vel_p, rows, size, tw, movable, lam, vel, True)
+    _solve_exact(seq, nseq, parent, nb, movable, rows, size, tw, vel_p, lam, vel)
     if nu == 0:
         return True, vel, 0, 0.0
     s_vec = np.empty(nu)
@@ -176,7 +174,8 @@ def _round(m, tree, ws, opt, rw, n, lam, vel_p, its, nu, grips, lam0, iters, asl
         chosen[its[i]] = True
     pushed = vel_p.copy()
     apply_rows(rw, chosen, ws[1], ws[2], lam, pushed)
-    _solve_exact(seq, nseq, parent, nb, rw, pushed, rows, size, tw, movable, lam, vel, False)
+    init_rhs(seq, nseq, nb, rw, pushed, rows, size, tw[2])
+    _solve_exact(seq, nseq, parent, nb, movable, rows, size, tw, pushed, lam, vel)
     return True, vel, sweeps, residual
 
 

@@ -258,9 +258,8 @@ def test_equal_time_runs_are_measured_at_the_finer_step():
     auto = Setting("auto", "auto")
 
     def row(setting, seconds, h=0.02):
-        return PrecisionRow("creep", setting, h, 300, seconds, NAN_, NAN_, 3.97e-4, "rad")
+        return PrecisionRow("creep", setting, h, 300, seconds, math.nan, math.nan, 3.97e-4, "rad")
 
-    NAN_ = math.nan
     got = precision.equal_time_rows([row(BASELINE, 1.0), row("auto", 0.5)], [auto], 1, {})
     (r,) = got
     assert (r.scene, r.setting, r.note) == ("creep", "auto", precision.EQUAL_TIME_NOTE)
