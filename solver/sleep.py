@@ -124,7 +124,9 @@ def touch(island, asleep, still, fresh, loaded, grip_body, pointer, centre, boun
                     d += (centre[k, c] - pointer[c]) ** 2
                 if math.sqrt(d) - pointer[3] - bound[k] <= margin:
                     woke = _wake(island, asleep, still, fresh, island[b]) or woke
-    changed = True
+    changed = False
+    for b in range(len(island)):
+        changed = changed or asleep[b]  # no sleeper: no pair has one to wake
     while changed:
         changed = False
         for p in range(len(pair_a)):

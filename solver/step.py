@@ -44,7 +44,7 @@ from solver.rows import KEY_SHIFT, KIND_CONTACT, KIND_FRICTION, KIND_RHEOLOGY, R
 from solver.sleep import body_islands, settle, touch
 from solver.stabilize import project_joints
 from solver.state import State, StepInput, StepReport
-from solver.substep import run_substeps, substeps_needed
+from solver.substep import model_substeps, run_substeps
 from solver.touch import POINTER_KEY_OFFSET, pointer_contacts
 
 
@@ -183,12 +183,7 @@ def step(model: Model, state: State, inp: StepInput | None = None) -> tuple[Stat
     geometric stiffness needs them: solver.substep)."""
     inp = inp or StepInput()
     body_rot = quat.matrix(state.body_quat)
-    n = substeps_needed(
-        model.options.h, model.options.max_substeps, model.joint_parent, model.joint_bone,
-        model.joint_anchor_parent, model.joint_anchor_child, model.body_inv_mass,
-        body_rot @ model.body_inertia @ np.swapaxes(body_rot, 1, 2), body_rot,
-        state.warm_key, state.warm_lam,
-    )  # fmt: skip
+    n = model_substeps(model, state)
     if n > 1:
         return run_substeps(model, state, inp, n, step)
     return _step_once(model, state, inp, body_rot)

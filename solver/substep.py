@@ -38,8 +38,9 @@ growing during the step."""
 
 
 @njit(cache=True, error_model="numpy")
-def _least_moment(inertia_w, b, r):
-    """Least moment of body b's world inertia about axes perpendicular to r (kg·m²)."""
+def _least_moment(inertia, b, r):
+    """Least moment of body b's inertia about axes perpendicular to r (kg·m²), both in
+    the body's frame."""
     rn = math.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
     e = (r[0] / rn, r[1] / rn, r[2] / rn)
     t = (1.0, 0.0, 0.0) if abs(e[0]) < 0.9 else (0.0, 1.0, 0.0)
@@ -50,23 +51,36 @@ def _least_moment(inertia_w, b, r):
     a = c = s = 0.0
     for i in range(3):
         for k in range(3):
-            a += u[i] * inertia_w[b, i, k] * u[k]
-            c += v[i] * inertia_w[b, i, k] * v[k]
-            s += u[i] * inertia_w[b, i, k] * v[k]
+            a += u[i] * inertia[b, i, k] * u[k]
+            c += v[i] * inertia[b, i, k] * v[k]
+            s += u[i] * inertia[b, i, k] * v[k]
     return 0.5 * (a + c) - math.sqrt(0.25 * (a - c) ** 2 + s * s)
 
 
 @njit(cache=True, error_model="numpy")
-def _row_dot(rot, b, i, local, j):
-    """(R_b · local_j)_i."""
-    return rot[b, i, 0] * local[j, 0] + rot[b, i, 1] * local[j, 1] + rot[b, i, 2] * local[j, 2]
-
-
-@njit(cache=True, error_model="numpy")
-def _lever(rot, b, local, j):
-    """R_b · local_j: joint j's anchor from body b's centre of mass, world frame."""
-    return (_row_dot(rot, b, 0, local, j), _row_dot(rot, b, 1, local, j),
-            _row_dot(rot, b, 2, local, j))  # fmt: skip
+def tension_levers(joint_parent, joint_bone, anchor_parent, anchor_child, inv_mass, inertia):
+    """(nj, 6) per joint, parent side then child side: |r| (m), 1/|r|² and I⊥/|r|²
+    (0 where the side is the world, immovable, or has no lever), r the anchor in the
+    side's own frame and I⊥ its least moment about axes perpendicular to r
+    (``_least_moment``).  They are all that ``substeps_needed`` takes
+    from the geometry, and none depends on the pose: a rotation keeps |r|, and the
+    least moment about axes ⟂ r is the same whether r and I are both in the body's frame
+    or both in the world's.  So they are made once per model."""
+    nj = len(joint_parent)
+    out = np.zeros((nj, 6))
+    for j in range(nj):
+        for side in range(2):
+            b = joint_parent[j] if side == 0 else joint_bone[j]
+            if b < 0 or inv_mass[b] <= 0.0:
+                continue
+            local = anchor_parent if side == 0 else anchor_child
+            r = (local[j, 0], local[j, 1], local[j, 2])
+            r2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
+            out[j, 3 * side] = math.sqrt(r2)
+            if r2 > 0.0:
+                out[j, 3 * side + 1] = 1.0 / r2
+                out[j, 3 * side + 2] = _least_moment(inertia, b, r) / r2
+    return out
 
 
 @njit(cache=True, error_model="numpy")
@@ -81,11 +95,10 @@ def _anchor_forces(nj, warm_key, warm_lam):
 
 
 @njit(cache=True, error_model="numpy")
-def substeps_needed(
-    h, max_substeps, joint_parent, joint_bone, anchor_parent, anchor_child, inv_mass,
-    inertia_w, rot, warm_key, warm_lam,
-):  # fmt: skip
-    """n ≥ 1 equal substeps for the step; 1 when max_substeps ≤ 1.
+def substeps_needed(h, max_substeps, joint_parent, joint_bone, inv_mass, levers, warm_key,
+                    warm_lam):  # fmt: skip
+    """n ≥ 1 equal substeps for the step; 1 when max_substeps ≤ 1.  levers: the model's
+    ``tension_levers``.
 
     Per body b, k_b = Σ_j |f_j||r_bj| over its joints.  Per joint between two movable
     bodies, the transverse motion u of the anchor turns each side by u/|r|, so the mode
@@ -98,27 +111,45 @@ def substeps_needed(
     f = _anchor_forces(nj, warm_key, warm_lam)
     k = np.zeros(len(inv_mass))
     for j in range(nj):
-        for side in range(2):
-            b = joint_parent[j] if side == 0 else joint_bone[j]
-            if b >= 0 and inv_mass[b] > 0.0:
-                r = _lever(rot, b, anchor_parent if side == 0 else anchor_child, j)
-                k[b] += f[j] * math.sqrt(r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
+        p, c = joint_parent[j], joint_bone[j]
+        if p >= 0:
+            k[p] += f[j] * levers[j, 0]
+        k[c] += f[j] * levers[j, 3]
     worst = 0.0
     for j in range(nj):
         p, c = joint_parent[j], joint_bone[j]
         if p < 0 or inv_mass[p] <= 0.0 or inv_mass[c] <= 0.0:
             continue
-        stiff = inertia = 0.0
-        for side in range(2):
-            b = p if side == 0 else c
-            r = _lever(rot, b, anchor_parent if side == 0 else anchor_child, j)
-            r2 = r[0] * r[0] + r[1] * r[1] + r[2] * r[2]
-            if r2 > 0.0:
-                stiff += k[b] / r2
-                inertia += _least_moment(inertia_w, b, r) / r2
+        stiff = k[p] * levers[j, 1] + k[c] * levers[j, 4]
+        inertia = levers[j, 2] + levers[j, 5]
         if inertia > 0.0:
             worst = max(worst, stiff / inertia)
     return max(1, min(max_substeps, math.ceil(h * math.sqrt(worst) / SAFE_RATE)))
+
+
+_LEVERS: dict[int, np.ndarray] = {}
+
+
+def model_levers(model: Model) -> np.ndarray:
+    """``tension_levers`` of ``model``, made once (kept while the model lives)."""
+
+    def build() -> np.ndarray:
+        return tension_levers(
+            model.joint_parent, model.joint_bone, np.ascontiguousarray(model.joint_anchor_parent),
+            np.ascontiguousarray(model.joint_anchor_child), model.body_inv_mass,
+            np.ascontiguousarray(model.body_inertia),
+        )  # fmt: skip
+
+    return kept_with(model, _LEVERS, build)
+
+
+def model_substeps(model: Model, state: State) -> int:
+    """``substeps_needed`` for a step of ``model`` from ``state``."""
+    o = model.options
+    return substeps_needed(
+        o.h, o.max_substeps, model.joint_parent, model.joint_bone, model.body_inv_mass,
+        model_levers(model), state.warm_key, state.warm_lam,
+    )  # fmt: skip
 
 
 _SUB_MODELS: dict[tuple[int, int], Model] = {}

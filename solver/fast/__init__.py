@@ -106,12 +106,14 @@ def _input_arrays(fm: FastModel, inp: StepInput) -> tuple | None:
     pvec = cvec = _NO_VEC
     mode, body, position_only = MODE_NONE, 0, False
     if ptr is not None and (cpl is not None or ptr.radius > 0.0):
-        pvec = fm.pvec
+        pvec, (pos, rotation, vel, omega) = fm.pvec, fm.pointer
         try:
-            np.concatenate((ptr.pos, ptr.quat, ptr.vel, ptr.omega), out=pvec[:13])
-        except ValueError:  # not 13 numbers
+            if not len(ptr.pos) == len(ptr.vel) == len(ptr.omega) == 3 == len(ptr.quat) - 1:
+                return None
+            pos[...], rotation[...], vel[...], omega[...] = ptr.pos, ptr.quat, ptr.vel, ptr.omega
+            pvec[13] = ptr.radius
+        except (TypeError, ValueError):  # not 13 numbers
             return None
-        pvec[13] = ptr.radius
         mode = MODE_TOUCH
     if mode == MODE_TOUCH and cpl is not None:  # a pointer that grips
         if not 0 <= cpl.body < nb:

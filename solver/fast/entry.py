@@ -7,9 +7,10 @@ caller made:
 - ``fast_kernel`` (``fast_step``): out are fresh arrays that become the new State; the
   warm keys and λ, whose length is known only at the end, are returned.
 - ``inplace_kernel`` (``solver.fast.sim.Sim``): all of the Sim's arrays are views of one
-  flat store like the model's (two sets of state arrays: it reads one, writes the other,
-  and the Sim flips between them; the warm keys and λ, the report), so a step unboxes
-  ~25 arrays and boxes none.
+  set of flat buffers, its own copy of the model's with the state after it (two sets of
+  state arrays: it reads one, writes the other, and the Sim flips between them; the
+  warm keys and λ, the report), so a step unboxes 15 arrays (with the input's five) and
+  boxes none.
 
 State tuples: prev, out (x, q, v, ω, q_sf, yielded, anchor, τ_avg, τ, asleep, still) with
 the warm keys and λ beside them; prev is read (except τ), out written.  They must not
@@ -21,7 +22,7 @@ from __future__ import annotations
 
 from numba import njit
 
-from solver.fast.flat import leaf, unflatten
+from solver.fast.flat import NLEAF, SCHEMA, leaf
 from solver.fast.kernel import OK, step_kernel
 
 
@@ -32,26 +33,25 @@ def fast_kernel(flat, prev, keys, lam, inp, out, rep_i, rep_f):
     (10,) (residual, grip f, grip τ, touch f) receive the report.  Returns (status, warm
     keys (n,), warm λ (n,)); on SUBSTEP rep_i[0] is the number of substeps asked for, on
     any status but OK out holds nothing."""
-    m, g, tree, ptree, ws, pws, opt, iopt = unflatten(flat)
     st = (prev[0], prev[1], prev[2], prev[3], prev[4], prev[5], prev[6], prev[7], keys, lam,
           prev[9], prev[10])  # fmt: skip
-    status, _, new_keys, new_lam, _, _ = step_kernel(
-        m, g, tree, ptree, ws, pws, opt, iopt, st, inp, out, rep_i, rep_f
-    )
+    status, _, new_keys, new_lam, _, _ = step_kernel(flat, st, inp, out, rep_i, rep_f)
     return status, new_keys, new_lam
 
 
 _SET = ("f3", "f4", "f3", "f3", "f3", "b", "f4", "f", "f3", "b", "f")  # x … τ, asleep, still
 NSET = len(_SET)
-SIM_SCHEMA = (_SET, _SET, ("i", "f", "i"), "i", "f")
-"""A Sim's arrays (flat.flatten): two state sets, warm (keys, λ, count (1,)) with room for
-every row, rep_i (4,), rep_f (10,)."""
+SIM_SCHEMA = (*SCHEMA, _SET, _SET, ("i", "f", "i"), "i", "f")
+"""A Sim's arrays (flat.flatten): its own copy of the packed model (SCHEMA: its
+workspaces are the Sim's alone), two state sets, warm (keys, λ, count (1,)) with room for
+every row, rep_i (4,), rep_f (10,).  One set of buffers holds them all, so a step unboxes
+ten arrays for all of them."""
 
 
 @njit(cache=True)
-def _state_set(store, k):
-    """The state set whose first leaf is k (0 or NSET) of a Sim's store."""
-    f, f3, f4, b, lay = store[0], store[1], store[2], store[8], store[9]
+def _state_set(flat, k):
+    """The state set whose first leaf is k of a Sim's flat buffers."""
+    f, f3, f4, b, lay = flat[0], flat[1], flat[2], flat[8], flat[9]
     return (
         leaf(f3, lay, k), leaf(f4, lay, k + 1), leaf(f3, lay, k + 2), leaf(f3, lay, k + 3),
         leaf(f3, lay, k + 4), leaf(b, lay, k + 5), leaf(f4, lay, k + 6), leaf(f, lay, k + 7),
@@ -60,14 +60,15 @@ def _state_set(store, k):
 
 
 @njit(cache=True, error_model="numpy")
-def inplace_kernel(flat, store, phase, inp):
-    """``fast_kernel`` on a Sim's arrays, one flat ``store`` (SIM_SCHEMA): reads state set
-    ``phase`` (0 or 1), writes the other (the Sim then flips phase), replaces the warm keys
-    and λ, fills rep_i and rep_f.  Returns (status, substeps asked for); on a status other
-    than OK set ``phase`` and the warm keys are as they were."""
-    f, i, lay = store[0], store[6], store[9]
-    st, out = _state_set(store, NSET * phase), _state_set(store, NSET - NSET * phase)
-    w = 2 * NSET
+def inplace_kernel(flat, phase, inp):
+    """``fast_kernel`` on a Sim's arrays, the flat buffers of SIM_SCHEMA (the model's
+    leaves first, so they are also the model's flat): reads state set ``phase`` (0 or
+    1), writes the other (the Sim then flips phase), replaces the warm keys and λ, fills
+    rep_i and rep_f.  Returns (status, substeps asked for); on a status other than OK
+    ``phase`` and the warm keys are as they were."""
+    f, i, lay = flat[0], flat[6], flat[9]
+    st, out = _state_set(flat, NLEAF + NSET * phase), _state_set(flat, NLEAF + NSET - NSET * phase)
+    w = NLEAF + 2 * NSET
     keys, lam, count = leaf(i, lay, w), leaf(f, lay, w + 1), leaf(i, lay, w + 2)
     rep_i, rep_f = leaf(i, lay, w + 3), leaf(f, lay, w + 4)
     nw = count[0]

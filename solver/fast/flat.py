@@ -45,7 +45,7 @@ _CONTACTS = ("i", "i", "f3", "f3", "f", "f", "i")
 _TREE_WS = ("f66", "f66", "f6", "f6")
 SCHEMA = (
     ("i", "i", "f3", "f3", "f3", "f3", "f3", "b", "f3", "f", "f", "f", "f", "b", "b", "f",
-     "f", "f33", "f33", "i"),  # m
+     "f", "f33", "f33", "i", "f6", "f3"),  # m
     ("i", "f3", "f4", "i", "f", "f3", "f", "i", "i", "i", "f", "i", "i", "f", "i", "f"),  # g
     ("i", "i", "i", "i", "i", "i6", "i", _TREE_WS),  # tree
     ("i", "i", "i", "i6", "i", _TREE_WS),  # ptree
@@ -138,15 +138,15 @@ def leaf(buf, lay, k):
 @njit(cache=True)
 def _model(flat, k):
     """m (pack): joints' indices, anchors, gains, limits, yield; bodies' mass, inertia,
-    island."""
-    f, f3, _, _, f33, _, i, _, b, lay = flat
+    island; joints' tension levers and limit thresholds."""
+    f, f3, _, f6, f33, _, i, _, b, lay = flat
     return (
         leaf(i, lay, k), leaf(i, lay, k + 1), leaf(f3, lay, k + 2), leaf(f3, lay, k + 3),
         leaf(f3, lay, k + 4), leaf(f3, lay, k + 5), leaf(f3, lay, k + 6), leaf(b, lay, k + 7),
         leaf(f3, lay, k + 8), leaf(f, lay, k + 9), leaf(f, lay, k + 10), leaf(f, lay, k + 11),
         leaf(f, lay, k + 12), leaf(b, lay, k + 13), leaf(b, lay, k + 14), leaf(f, lay, k + 15),
         leaf(f, lay, k + 16), leaf(f33, lay, k + 17), leaf(f33, lay, k + 18),
-        leaf(i, lay, k + 19),
+        leaf(i, lay, k + 19), leaf(f6, lay, k + 20), leaf(f3, lay, k + 21),
     )  # fmt: skip
 
 

@@ -147,7 +147,7 @@ def _iterate(rw, its, nu, s_vec, lam0, iterations):
     return lo, hi, fric, mu, start
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def _round(m, tree, ws, opt, rw, n, lam, vel_p, its, nu, grips, lam0, iters, asleep):
     """One solve with the current sets: (ok, v, sweeps, residual); fills λ.
     grips = (free grip rows, their count, the gripped body)."""
@@ -179,7 +179,7 @@ def _round(m, tree, ws, opt, rw, n, lam, vel_p, its, nu, grips, lam0, iters, asl
     return True, vel, sweeps, residual
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def hybrid_solve(m, tree, ws, opt, rw, n, ne, vel_free, lam0, iterations, grip, skip, asleep):
     """(ok, λ, v, sweeps, residual) as solver.hybrid.hybrid_solve; ok False when the
     exact system is degenerate; ``skip``: leave dormant rows out of the iteration;
@@ -190,18 +190,20 @@ def hybrid_solve(m, tree, ws, opt, rw, n, ne, vel_free, lam0, iterations, grip, 
     its, free_grip = np.empty(n, np.int64), np.empty(6, np.int64)
     lam = np.zeros(n)
     lo, hi, kind = rw[4], rw[5], rw[11]
-    vel, sweeps, residual = vel_free.copy(), 0, 0.0
+    vel, sweeps, residual = vel_free, 0, 0.0  # (replaced by the first round's)
     for _ in range(ROUNDS):
-        nu, nfree = 0, 0
+        nu, nfree, pinned = 0, 0, False
         for i in range(ne, n):
             lam[i] = lo[i] if at_lo[i] else hi[i] if at_hi[i] else 0.0
+            pinned = pinned or at_lo[i] or at_hi[i]
             if kind[i] == KIND_GRIP:
                 if not (at_lo[i] or at_hi[i]):
                     free_grip[nfree], nfree = i, nfree + 1
             elif not dormant[i]:
                 its[nu], nu = i, nu + 1
         vel_p = vel_free.copy()
-        apply_rows(rw, at_lo | at_hi, ws[1], ws[2], lam, vel_p)
+        if pinned:  # (none in most rounds: nothing to add)
+            apply_rows(rw, at_lo | at_hi, ws[1], ws[2], lam, vel_p)
         ok, vel, sweeps, residual = _round(
             m, tree, ws, opt, rw, n, lam, vel_p, its, nu, (free_grip, nfree, body), lam0,
             iterations, asleep,

@@ -33,6 +33,7 @@ from solver.fast.contacts import (
     is_touch_row,
     world_shapes,
 )
+from solver.fast.flat import unflatten
 from solver.fast.hybrid import hybrid_solve
 from solver.fast.kin import congruence, matvec, qmatrix, quat_at
 from solver.fast.post import (
@@ -63,8 +64,8 @@ STAGES = (
     "free velocities",
     "joint rows (anchors, rheology, limits)",
     "collision and contact/grip rows",
-    "row response, regularisation",
-    "solve",
+    "regularisation",
+    "solve (and the row responses it uses)",
     "integrate, project, monitor",
     "rheology update, warm keys, report",
 )
@@ -81,7 +82,7 @@ def tick(prof, on, stage, t0):
     return t
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def free_velocity(m, opt, st, inv_i, inp, out):
     """(nb,6) velocities after gravity and external loads, before constraints."""
     vel, omega = st[2], st[3]
@@ -97,7 +98,7 @@ def free_velocity(m, opt, st, inv_i, inp, out):
             out[b, 3 + k] = omega[b, k] + h * tau[k] if ivec[4] else omega[b, k]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def build_rows(m, g, opt, iopt, st, rot, vel_free, inp, ws, asleep, awake):
     """Fill the row table; returns (rows, scene contacts, first grip row, grip rows), or
     rows = −1 when a box–box pair is within reach.  The shapes' world frames (ws[8],
@@ -150,20 +151,41 @@ def build_rows(m, g, opt, iopt, st, rot, vel_free, inp, ws, asleep, awake):
     return n, ncontact, n, 0
 
 
-@njit(cache=True, error_model="numpy")
-def regularize(rw, n, resp_a, resp_b, eps):
-    """comp ← ε·A_ii on every row without compliance of its own."""
+@njit(cache=True, error_model="numpy", inline="always")
+def regularize(rw, n, inv_mass, inv_i, h, eps):
+    """comp ← ε·A_ii on every row without compliance of its own, A_ii = J_i h M⁻¹ J_iᵀ
+    from each side's response made in registers (the products and order of
+    ``response``, so bitwise what it stores; the stored responses are only made for the
+    rows a solver reads)."""
     if eps <= 0.0:
         return
     for i in range(n):
         if not rw[6][i] > 0.0:
             d = 0.0
+            ra = _row_response(rw[0], rw[2], i, inv_mass, inv_i, h)
+            rb = _row_response(rw[1], rw[3], i, inv_mass, inv_i, h)
             for k in range(6):
-                d += rw[2][i, k] * resp_a[i, k] + rw[3][i, k] * resp_b[i, k]
+                d += rw[2][i, k] * ra[k] + rw[3][i, k] * rb[k]
             rw[6][i] = eps * d
 
 
 @njit(cache=True, error_model="numpy")
+def _row_response(body, jac, i, inv_mass, inv_i, h):
+    """Row i's response on one side (``solver.fast.post.response``'s entries), or zeros."""
+    b = body[i]
+    if b < 0:
+        return (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    s0 = inv_i[b, 0, 0] * jac[i, 3] + inv_i[b, 0, 1] * jac[i, 4]
+    s1 = inv_i[b, 1, 0] * jac[i, 3] + inv_i[b, 1, 1] * jac[i, 4]
+    s2 = inv_i[b, 2, 0] * jac[i, 3] + inv_i[b, 2, 1] * jac[i, 4]
+    return (
+        h * (inv_mass[b] * jac[i, 0]), h * (inv_mass[b] * jac[i, 1]),
+        h * (inv_mass[b] * jac[i, 2]), h * (s0 + inv_i[b, 0, 2] * jac[i, 5]),
+        h * (s1 + inv_i[b, 1, 2] * jac[i, 5]), h * (s2 + inv_i[b, 2, 2] * jac[i, 5]),
+    )  # fmt: skip
+
+
+@njit(cache=True, error_model="numpy", inline="always")
 def warm_start(opt, iopt, st, rw, n):
     """Last step's λ of rows with the same key × factor.  The keys are sorted and the rows
     are made nearly in key order, so the key after the last one found is tried first
@@ -243,16 +265,24 @@ def direct(m, tree, ws, opt, rw, n, vel_free, grip, asleep):
     return 1, lam, vel, 0.0
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def solve(m, tree, ws, opt, iopt, st, n, vel_free, grip, asleep):
-    """(status, λ, v, iterations, residual, solver) as solver.step.solve."""
+    """(status, λ, v, iterations, residual, solver) as solver.step.solve.  The row
+    responses (ws[1], ws[2]) are made here, for the rows the solver reads: all of them
+    for the direct and PGS solves, only the bounded ones (after the joints') for the
+    hybrid, whose joint rows the tree solves from their Jacobians."""
     rw = ws[0]
-    lo, hi, fric = rw[4], rw[5], rw[8]
+    lo, hi, fric, kind = rw[4], rw[5], rw[8], rw[11]
     bilateral = True
     for i in range(n):
         if not (lo[i] < 0.0 and hi[i] > 0.0 and fric[i] < 0):
             bilateral = False
     method = iopt[0]
+    hybrid = method == METHOD_HYBRID or (method == METHOD_AUTO and not bilateral)
+    ne = 0
+    while hybrid and ne < n and kind[ne] <= KIND_RHEOLOGY:
+        ne += 1
+    response(rw, ne, n, m[16], ws[6], opt[0], ws[1], ws[2])
     lam0 = warm_start(opt, iopt, st, rw, n)
     if method == METHOD_DIRECT or (method == METHOD_AUTO and bilateral):
         if not bilateral:
@@ -263,10 +293,7 @@ def solve(m, tree, ws, opt, iopt, st, n, vel_free, grip, asleep):
         if code == 0:
             return OK, lam, vel, 1, residual, SOLVER_DIRECT
         lam0 = lam
-    if method == METHOD_HYBRID or (method == METHOD_AUTO and not bilateral):
-        ne, kind = 0, rw[11]
-        while ne < n and kind[ne] <= KIND_RHEOLOGY:
-            ne += 1
+    if hybrid:
         ok, lam, vel, sweeps, residual = hybrid_solve(
             m, tree, ws, opt, rw, n, ne, vel_free, lam0, iopt[1], grip, iopt[9], asleep
         )
@@ -294,7 +321,7 @@ def solve(m, tree, ws, opt, iopt, st, n, vel_free, grip, asleep):
     return OK, lam, vel, sweeps, residual, SOLVER_PGS
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def report(rw, n, lam, rep_f):
     """rep_f[1:4] grip force, [4:7] grip torque, [7:10] pointer touch force."""
     for i in range(n):
@@ -307,8 +334,12 @@ def report(rw, n, lam, rep_f):
 
 
 @njit(cache=True, error_model="numpy")
-def step_kernel(m, g, tree, ptree, ws, pws, opt, iopt, st, inp, out, rep_i, rep_f):
-    """One step of st into the caller's arrays (entry points: ``solver.fast.entry``).
+def step_kernel(flat, st, inp, out, rep_i, rep_f):
+    """One step of st into the caller's arrays (entry points: ``solver.fast.entry``), the
+    model's packed tuples rebuilt from its flat buffers here (solver.fast.flat).
+
+    The step's parts that take those tuples are inlined into it (``inline="always"``):
+    called, each would be passed every array of them, ~1 µs a call on the doll.
 
     st (x, q, v, ω, q_sf, yielded, anchor, τ_avg, warm keys, warm λ, asleep, still);
     out (x, q, v, ω, q_sf, yielded, anchor, τ_avg, τ, asleep, still) is written and must not
@@ -317,25 +348,23 @@ def step_kernel(m, g, tree, ptree, ws, pws, opt, iopt, st, inp, out, rep_i, rep_
     zeroed, then filled.  Returns (status, out, warm keys, warm λ, rep_i, rep_f); the warm
     keys and λ must be fresh arrays (fast_step keeps them in the State, and the model's
     arrays are views that must not reach Python: solver.fast.flat)."""
+    m, g, tree, ptree, ws, pws, opt, iopt = unflatten(flat)
     pos, quat = st[0], st[1]
     nb = len(pos)
     rw, rot, inv_i, inertia_w = ws[0], ws[5], ws[6], ws[7]
     out[5][:] = False
     rep_i[:] = 0
     rep_f[:] = 0
-    none_k, none_l = np.empty(0, dtype=np.int64), np.empty(0)
     prof, on = ws[10], iopt[7]
     t = cycles() if on else 0
+    nsub = substeps_needed(opt[0], iopt[6], m[0], m[1], m[16], m[20], st[8], st[9])
+    if nsub > 1:
+        rep_i[0] = nsub
+        return SUBSTEP, out, _no_keys(), np.empty(0), rep_i, rep_f
     for b in range(nb):
         qmatrix(quat_at(quat, b), rot, b)
         congruence(rot, b, m[18], b, inv_i, b)
         congruence(rot, b, m[17], b, inertia_w, b)
-    nsub = substeps_needed(
-        opt[0], iopt[6], m[0], m[1], m[2], m[3], m[16], inertia_w, rot, st[8], st[9]
-    )
-    if nsub > 1:
-        rep_i[0] = nsub
-        return SUBSTEP, out, none_k, none_l, rep_i, rep_f
     if iopt[5] or inp[4][0] == MODE_TOUCH or iopt[10]:
         world_shapes(g, pos, quat, ws[8], ws[9])
     asleep, fresh = out[9], np.zeros(nb, dtype=np.bool_)
@@ -355,10 +384,9 @@ def step_kernel(m, g, tree, ptree, ws, pws, opt, iopt, st, inp, out, rep_i, rep_
         m, g, opt, iopt, st, rot, vel_free, inp, ws, asleep, awake
     )
     if n < 0:
-        return FALLBACK, out, none_k, none_l, rep_i, rep_f
+        return FALLBACK, out, _no_keys(), np.empty(0), rep_i, rep_f
     t = tick(prof, on, 3, t + (prof[2] - joint_part))  # build_rows timed its joint rows (2)
-    response(rw, n, m[16], inv_i, opt[0], ws[1], ws[2])
-    regularize(rw, n, ws[1], ws[2], opt[6])
+    regularize(rw, n, m[16], inv_i, opt[0], opt[6])
     t = tick(prof, on, 4, t)
     grip = (grip0, ngrip, inp[4][1])
     status, lam, vel, iters, residual, used = solve(
@@ -366,12 +394,12 @@ def step_kernel(m, g, tree, ptree, ws, pws, opt, iopt, st, inp, out, rep_i, rep_
     )
     t = tick(prof, on, 5, t)
     if status or not state_ok(m, opt, pos, quat, vel[:, :3], vel[:, 3:]):
-        return FALLBACK, out, none_k, none_l, rep_i, rep_f
+        return FALLBACK, out, _no_keys(), np.empty(0), rep_i, rep_f
     integrate(m, opt[0], pos, quat, vel, rot, asleep, out[0], out[1], out[3])
     if not project(m, ptree, pws, out[0], out[1], asleep):
-        return FALLBACK, out, none_k, none_l, rep_i, rep_f
+        return FALLBACK, out, _no_keys(), np.empty(0), rep_i, rep_f
     if not state_ok(m, opt, out[0], out[1], vel[:, :3], out[3]):
-        return FALLBACK, out, none_k, none_l, rep_i, rep_f
+        return FALLBACK, out, _no_keys(), np.empty(0), rep_i, rep_f
     out[2][:, :] = vel[:, :3]
     t = tick(prof, on, 6, t)
     rheology_update(m, opt, st, rw, n, lam, vel, ws[3], out[1], asleep, out[4:9])
@@ -387,6 +415,12 @@ def step_kernel(m, g, tree, ptree, ws, pws, opt, iopt, st, inp, out, rep_i, rep_
 
 
 @njit(cache=True, error_model="numpy")
+def _no_keys():
+    """The warm keys of a step handed back (made only then: an allocation a step)."""
+    return np.empty(0, dtype=np.int64)
+
+
+@njit(cache=True, error_model="numpy", inline="always")
 def warm_table(rw, n, lam):
     """(keys, λ) of the rows that are not empty slots (solver.sleep), sorted by key for
     the next step's binary search.  Keys are unique and the table is built nearly in key
@@ -407,7 +441,7 @@ def warm_table(rw, n, lam):
     return keys, values
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def wake(m, g, opt, iopt, st, inp, centre, asleep, still, fresh):
     """asleep, still (nb,) ← the state's, then wake what this step touches (solver.sleep:
     loads, the grip, a free pointer, moving neighbours); all awake when sleeping is off."""
@@ -432,7 +466,7 @@ def wake(m, g, opt, iopt, st, inp, centre, asleep, still, fresh):
           g[8], opt[4], st[2], st[3], opt[15], opt[16])  # fmt: skip
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def flowing_joints(m, yielded):
     """(nj,) bool: joints with rheology on the three-element rows (solver.joints.flowing)."""
     nj, has, plastic, finite_yield = len(m[0]), m[7], m[13], m[14]

@@ -17,6 +17,8 @@ Tuple layouts:
        7 joint_rheology 8 joint_axis 9 swing 10 twist_lo 11 twist_hi 12 yield
        13 plastic (all D_d finite) 14 finite yield 15 body_mass 16 body_inv_mass
        17 body_inertia 18 body_inv_inertia 19 body island (solver.sleep)
+       20 joints' tension levers (solver.substep.tension_levers) 21 limit thresholds
+       (solver.fast.rows.limit_thresholds)
   g    0 shape_body 1 shape_pos 2 shape_quat 3 kind 4 radius 5 half 6 bound 7 pair first
        8 pair second 9 group 10 normal sign 11 body_a 12 body_b 13 friction
        14 pointer-touchable shapes 15 their friction with the pointer
@@ -41,8 +43,10 @@ import numpy as np
 
 from solver.fast.flat import flatten
 from solver.fast.kernel import STAGES
+from solver.fast.rows import limit_thresholds
 from solver.model import Model, kept_with
 from solver.sleep import body_islands
+from solver.substep import model_levers
 
 METHODS = {"auto": 0, "pgs": 1, "direct": 2, "hybrid": 3}
 FEATURES = (2, 8, 3, 3, 16)  # most contacts per pair of each group
@@ -57,7 +61,9 @@ class FastModel:
 
     m … iopt: views into ``flat`` (module docstring); zeros (nb,3): the force and torque
     of a step without loads; pvec (14,), ivec (5,), rep_i (4,): the step's pointer and
-    flag inputs and integer report, rewritten by every step (solver.fast)."""
+    flag inputs and integer report, rewritten by every step (solver.fast); pointer:
+    pvec's position, quaternion, velocity and angular velocity views (made once: an
+    assignment through a view costs a fifth of slicing pvec each step)."""
 
     m: tuple
     g: tuple
@@ -76,6 +82,11 @@ class FastModel:
     flags: tuple = (0, 0, False, False, False)  # what ivec holds
     last: tuple = (None, None)  # (State fast_step returned last, its kernel arrays)
     coupling: tuple = (None, None)  # (Coupling packed last, its packed array)
+    pointer: tuple = ()
+
+    def __post_init__(self) -> None:
+        p = self.pvec
+        self.pointer = (p[0:3], p[3:7], p[7:10], p[10:13])
 
 
 _CACHE: dict[int, FastModel] = {}
@@ -115,6 +126,15 @@ def pack(model: Model) -> FastModel:
         _c(model.body_inertia),
         _c(model.body_inv_inertia),
         _c(body_islands(model), np.int64),
+        _c(model_levers(model)),
+        _c(
+            limit_thresholds(
+                model.joint_swing,
+                model.joint_twist_lo,
+                model.joint_twist_hi,
+                model.options.limit_margin,
+            )
+        ),
     )
     g, ncontact, reason = _geometry(model)
     tree, ptree = _forest(model)

@@ -60,13 +60,21 @@ def _omega_from_momentum(q, mom, inv_inertia, b, rot):
     return matvec(rot, b, matvec(inv_inertia, b, tmatvec(rot, b, mom)))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def integrate(m, h, pos, quat, vel, rot, asleep, out_pos, out_quat, out_omega):
     """Semi-implicit Euler in momentum form with the implicit midpoint rotation rate.
     rot (nb,3,3) holds R(q[t]) on entry and R(q[t+1]) on return.  Sleeping bodies
-    (asleep (nb,) bool) keep their pose, at rest."""
+    (asleep (nb,) bool) keep their pose, at rest.
+
+    The midpoint passes run pass by pass over all bodies (the bodies' chains are
+    independent, so the processor overlaps them; body by body it waits on each pass's
+    latency), and a body's passes stop once one returns its rate unchanged: every later
+    pass would repeat it exactly, so the result is bit for bit that of all passes."""
     inertia, inv_inertia = m[17], m[18]
-    for b in range(len(pos)):
+    nb = len(pos)
+    rates, moms, done = np.empty((nb, 3)), np.empty((nb, 3)), np.empty(nb, np.bool_)
+    for b in range(nb):
+        done[b] = asleep[b]
         if asleep[b]:
             for k in range(3):
                 out_pos[b, k], out_omega[b, k] = pos[b, k], 0.0
@@ -75,15 +83,25 @@ def integrate(m, h, pos, quat, vel, rot, asleep, out_pos, out_quat, out_omega):
             continue
         put(out_pos, b, add(vec(pos, b), scale(h, (vel[b, 0], vel[b, 1], vel[b, 2]))))
         rate = (vel[b, 3], vel[b, 4], vel[b, 5])
-        mom = matvec(rot, b, matvec(inertia, b, tmatvec(rot, b, rate)))  # L = R I Rᵀ ω
+        put(moms, b, matvec(rot, b, matvec(inertia, b, tmatvec(rot, b, rate))))  # L = R I Rᵀ ω
+        put(rates, b, rate)
+    for _ in range(MIDPOINT_PASSES):
+        for b in range(nb):
+            if done[b]:
+                continue
+            rate = vec(rates, b)
+            mid = qmul(qexp(scale(0.5 * h, rate)), quat_at(quat, b))
+            new = _omega_from_momentum(mid, vec(moms, b), inv_inertia, b, rot)
+            done[b] = new[0] == rate[0] and new[1] == rate[1] and new[2] == rate[2]
+            put(rates, b, new)
+    for b in range(nb):
+        if asleep[b]:
+            continue
         q0 = quat_at(quat, b)
-        for _ in range(MIDPOINT_PASSES):
-            mid = qmul(qexp(scale(0.5 * h, rate)), q0)
-            rate = _omega_from_momentum(mid, mom, inv_inertia, b, rot)
-        q = qnormalize(qmul(qexp(scale(h, rate)), q0))
+        q = qnormalize(qmul(qexp(scale(h, vec(rates, b))), q0))
         for k in range(4):
             out_quat[b, k] = q[k]
-        put(out_omega, b, _omega_from_momentum(q, mom, inv_inertia, b, rot))
+        put(out_omega, b, _omega_from_momentum(q, vec(moms, b), inv_inertia, b, rot))
 
 
 @njit(cache=True, error_model="numpy")
@@ -116,7 +134,7 @@ def _awake_gap(m, pos, quat, asleep):
     return worst
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def state_ok(m, opt, pos, quat, lin, ang):
     """False when the monitor (solver.monitor.check_state) would raise."""
     worst = 0.0
@@ -136,15 +154,16 @@ def state_ok(m, opt, pos, quat, lin, ang):
 
 
 @njit(cache=True, error_model="numpy")
-def response(rw, n, inv_mass, inv_i, h, resp_a, resp_b):
-    """Velocity change per unit row force: h M⁻¹ jac, per side (0 for the world)."""
-    _response_side(rw[0], rw[2], n, inv_mass, inv_i, h, resp_a)
-    _response_side(rw[1], rw[3], n, inv_mass, inv_i, h, resp_b)
+def response(rw, start, n, inv_mass, inv_i, h, resp_a, resp_b):
+    """Velocity change per unit row force: h M⁻¹ jac, per side (0 for the world), of
+    rows start … n − 1."""
+    _response_side(rw[0], rw[2], start, n, inv_mass, inv_i, h, resp_a)
+    _response_side(rw[1], rw[3], start, n, inv_mass, inv_i, h, resp_b)
 
 
 @njit(cache=True, error_model="numpy")
-def _response_side(body, jac, n, inv_mass, inv_i, h, out):
-    for i in range(n):
+def _response_side(body, jac, start, n, inv_mass, inv_i, h, out):
+    for i in range(start, n):
         b = body[i]
         if b < 0:
             out[i, :] = 0.0
@@ -183,7 +202,7 @@ def _apply_side(body, n, resp, lam, vel):
                 vel[b, k] += resp[i, k] * lam[i]
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def project(m, tree, pws, pos, quat, asleep):
     """Pull joint anchors together in place (solver.stabilize.project_joints); False if the
     projection system is degenerate.  tree = (order, parent, no_rheo, rows, size, tw);
@@ -192,20 +211,22 @@ def project(m, tree, pws, pos, quat, asleep):
     order, parent, no_rheo, rows, size, tw = tree
     prw, pa, pb, rot, inv_i, inertia_w, mu = pws
     nb, nj = len(pos), len(m[0])
+    if nj == 0 or _awake_gap(m, pos, quat, asleep) <= PROJECT_TOL:
+        return True  # (most steps: nothing to pull together)
     zeros = np.zeros((nb, 6))
     seq, nseq, bone = np.empty(len(order), np.int64), 0, m[1]
     for i in order:
         if not (asleep[i] if i < nb else asleep[bone[i - nb]]):
             seq[nseq], nseq = i, nseq + 1
-    for _ in range(PROJECT_ROUNDS):
-        if nj == 0 or _awake_gap(m, pos, quat, asleep) <= PROJECT_TOL:
+    for k in range(PROJECT_ROUNDS):
+        if k > 0 and _awake_gap(m, pos, quat, asleep) <= PROJECT_TOL:
             break
         for b in range(nb):
             qmatrix(quat_at(quat, b), rot, b)
             congruence(rot, b, m[18], b, inv_i, b)
             congruence(rot, b, m[17], b, inertia_w, b)
         n = anchor_rows(m, pos, rot, pos, 1.0, 1.0, False, asleep, prw, 0)
-        response(prw, n, m[16], inv_i, 1.0, pa, pb)
+        response(prw, 0, n, m[16], inv_i, 1.0, pa, pb)
         prw[6][:n] = PROJECT_RIDGE
         for i in order:
             size[i] = node_rows(i, nb, no_rheo, rows[i])
@@ -224,7 +245,7 @@ def project(m, tree, pws, pos, quat, asleep):
     return True
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def rheology_update(m, opt, st, rw, n, lam, vel, rheo_joint, quat, asleep, out):
     """q_sf, yield flags, anchors, torque filter and torques after the solve; the joints
     of sleeping bodies (asleep) keep their state (their torque reads 0: no rows)."""

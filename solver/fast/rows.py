@@ -108,7 +108,7 @@ def is_null(rw, i):
     return (rw[0][i] < 0) & (rw[1][i] < 0)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def anchor_rows(m, pos, rot, omega, h, erp, arc, asleep, rw, n):
     """Three hard rows per joint (anchors pushed at their midpoint), bias (erp·C + N_c − N_p)/h.
 
@@ -161,7 +161,7 @@ def flowing(plastic, finite_yield, yielded, j):
     return plastic[j] and (yielded[j] or not finite_yield[j])
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def rheology_rows(m, quat, rot, h, q_sf, yielded, anchor, asleep, rheo_joint, rw, n):
     """Three compliant rows per joint with rheology, on the parent's axes a_k = R_p e_k:
     Voigt C = 1/(D_f + K_f h), bias K_f δ/(D_f + K_f h), δ = log(q_rel ⊗ anchor⁻¹);
@@ -216,31 +216,23 @@ def _wrap(x):
     return (x + math.pi) % (2.0 * math.pi) - math.pi
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def limit_rows(m, quat, rot, h, erp, margin, asleep, rw, n):
     """One-sided rows (λ ≥ 0) for limits within ``margin``: swing rows of every joint,
     then twist-low, then twist-high; bias C/h when C ≥ 0 (speculative) else erp·C/h.
     swing θ = acos(d·d'), C = swing − θ, axis −R_p (d × d')/|d × d'|;
     twist φ = 2 atan2(q.xyz·d, q.w) wrapped to [−π, π), C = φ − lo or hi − φ, axis ±R_p d'.
-    Joints of sleeping bodies (asleep) have none."""
-    parent, bone, axis_rest, swing, tw_lo, tw_hi = m[0], m[1], m[8], m[9], m[10], m[11]
+    Joints of sleeping bodies (asleep) have none.  Each joint's C and d' are computed
+    once (``limit_gaps``), the rows then made in their order."""
+    parent, bone, axis_rest = m[0], m[1], m[8]
+    gaps, turned = limit_gaps(m, quat, asleep)
     for slot in range(3):
         for j in range(len(parent)):
-            if asleep[bone[j]]:
+            c = gaps[j, slot]
+            if asleep[bone[j]] or not c < margin:
                 continue
             p = parent[j]
-            q = q_rel(j, parent, bone, quat)
-            d = vec(axis_rest, j)
-            d_now = qrotate(q, d)
-            if slot == 0:
-                c = swing[j] - math.acos(clip(dot(d, d_now), -1.0, 1.0))
-            else:
-                if q[0] < 0.0:
-                    q = (-q[0], -q[1], -q[2], -q[3])
-                twist = _wrap(2.0 * math.atan2(q[1] * d[0] + q[2] * d[1] + q[3] * d[2], q[0]))
-                c = twist - tw_lo[j] if slot == 1 else tw_hi[j] - twist
-            if not c < margin:
-                continue
+            d, d_now = vec(axis_rest, j), vec(turned, j)
             if slot == 0:
                 nv = cross(d, d_now)
                 length = norm(nv)
@@ -256,3 +248,61 @@ def limit_rows(m, quat, rot, h, erp, margin, asleep, rw, n):
             )
             n += 1
     return n
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def limit_gaps(m, quat, asleep):
+    """((nj, 3) C of the swing, twist-low and twist-high limits, (nj, 3) d' = q_rel d)
+    of every awake joint (``limit_rows``).  A C that cannot be below the margin is +∞,
+    its angle not computed: an infinite limit (∞ minus any finite angle), or a joint
+    well inside its limits by the thresholds m[21] (``limit_thresholds``), which compare
+    d·d' and the twist's tangent without acos or atan2 and keep a 10⁻⁹ rad margin over
+    the rounding of either, so the rows made are exactly those the angles give."""
+    parent, bone, axis_rest, swing, tw_lo, tw_hi = m[0], m[1], m[8], m[9], m[10], m[11]
+    thresholds = m[21]
+    nj = len(parent)
+    gaps, turned = np.empty((nj, 3)), np.empty((nj, 3))
+    for j in range(nj):
+        if asleep[bone[j]]:
+            continue
+        q = q_rel(j, parent, bone, quat)
+        d = vec(axis_rest, j)
+        d_now = qrotate(q, d)
+        for k in range(3):
+            turned[j, k] = d_now[k]
+        cos_swing = clip(dot(d, d_now), -1.0, 1.0)
+        gaps[j, 0] = INF
+        if not cos_swing >= thresholds[j, 0]:
+            gaps[j, 0] = swing[j] - math.acos(cos_swing)
+        if q[0] < 0.0:
+            q = (-q[0], -q[1], -q[2], -q[3])
+        along, w = q[1] * d[0] + q[2] * d[1] + q[3] * d[2], q[0]
+        gaps[j, 1] = gaps[j, 2] = INF
+        inside = w > 0.0 and along >= w * thresholds[j, 1] and along <= w * thresholds[j, 2]
+        if not inside and (tw_lo[j] != -INF or tw_hi[j] != INF):
+            twist = _wrap(2.0 * math.atan2(along, w))
+            gaps[j, 1], gaps[j, 2] = twist - tw_lo[j], tw_hi[j] - twist
+    return gaps, turned
+
+
+LIMIT_SLACK = 1e-9
+"""rad: how far inside (margin included) a limit must be for ``limit_thresholds`` to
+skip its angle: far above the rounding of acos, atan2 and the products compared."""
+
+
+def limit_thresholds(swing, twist_lo, twist_hi, margin: float) -> np.ndarray:
+    """(nj, 3) for ``limit_gaps``: cos(swing − margin − slack), below which d·d' must
+    fall for a swing row to be possible (2: always possible; −2: never), and the
+    tangents of half the twist range's inner bounds (lo + margin + slack)/2 and
+    (hi − margin − slack)/2: with q_w > 0 the twist is 2 atan(s/q_w), so
+    q_w tan_lo ≤ s ≤ q_w tan_hi means neither twist row.  A half-angle within 10⁻⁶ of
+    ±π/2 (where the twist wraps at ±π) gets +∞ / −∞: no skip, the angle decides."""
+    a = swing - margin - LIMIT_SLACK
+    cos_swing = np.where(a <= 0.0, 2.0, np.where(a >= np.pi, -2.0, np.cos(np.clip(a, 0, np.pi))))
+    half_lo = 0.5 * (twist_lo + margin + LIMIT_SLACK)
+    half_hi = 0.5 * (twist_hi - margin - LIMIT_SLACK)
+    edge = 0.5 * np.pi - 1e-6
+    with np.errstate(invalid="ignore"):
+        tan_lo = np.where(np.abs(half_lo) < edge, np.tan(np.clip(half_lo, -edge, edge)), np.inf)
+        tan_hi = np.where(np.abs(half_hi) < edge, np.tan(np.clip(half_hi, -edge, edge)), -np.inf)
+    return np.stack((cos_swing, tan_lo, tan_hi), axis=1).reshape(-1, 3)

@@ -45,31 +45,37 @@ _KERNEL = entry_point(inplace_kernel)
 class Sim:
     """One model's simulation, stepped in place (module docstring).  One thread at a time.
 
-    Its arrays are views of one flat store (solver.fast.entry.SIM_SCHEMA), passed to the
-    step whole: two sets of state arrays (``_FIELDS``; a step reads set ``_phase`` and
-    writes the other, since it must not overwrite what it still reads and a step handed
-    back to fast_step must find the old state intact), the warm keys and λ, the report."""
+    Its arrays are views of one set of flat buffers (solver.fast.entry.SIM_SCHEMA),
+    passed to the step whole: its own copy of the packed model and its workspaces, two
+    sets of state arrays (``_FIELDS``; a step reads set ``_phase`` and writes the other,
+    since it must not overwrite what it still reads and a step handed back to fast_step
+    must find the old state intact), the warm keys and λ, the report."""
 
     def __init__(self, model: Model, state: State | None = None) -> None:
         self.model = model
-        self._fm = fast_model(model)
-        self.load(initial_state(model) if state is None else state)
+        self._fm = fm = fast_model(model)
+        rest, nb, rows = initial_state(model), len(fm.zeros), len(fm.ws[0][0])
+        sets = tuple(tuple(np.zeros_like(_field(rest, f, nb)) for f in _FIELDS) for _ in "ab")
+        warm = (np.zeros(rows, np.int64), np.zeros(rows), np.zeros(1, np.int64))
+        packed = (fm.m, fm.g, fm.tree, fm.ptree, fm.ws, fm.pws, fm.opt, fm.iopt)
+        parts = (*packed, *sets, warm, np.zeros(4, np.int64), np.zeros(10))
+        self._flat, views = flatten(parts, SIM_SCHEMA)
+        self._sets, self._warm, self._rep_i, self._rep_f = views[8:10], *views[10:]
+        self.load(rest if state is None else state)
 
     def load(self, state: State) -> None:
         """Make ``state`` the current state (copied)."""
         nb, nj = len(self._fm.zeros), len(self._fm.m[0])
         current = tuple(_field(state, f, nb) for f in _FIELDS)
-        if [len(a) for a in current] != [nb] * 4 + [nj] * 5 + [nb] * 2:  # the step trusts these
+        if [a.shape for a in current] != [a.shape for a in self._sets[0]]:  # the step trusts these
             raise ValueError(f"Sim.load: not a state of this model ({nb} bodies, {nj} joints)")
+        keys, lam, count = self._warm
         n = len(state.warm_key)
-        room = max(len(self._fm.ws[0][0]), n)
-        keys, lam = np.zeros(room, np.int64), np.zeros(room)
-        keys[:n], lam[:n] = state.warm_key, state.warm_lam
-        warm = (keys, lam, np.array([n], np.int64))
-        spare = tuple(np.empty_like(a) for a in current)
-        parts = (current, spare, warm, np.zeros(4, np.int64), np.zeros(10))
-        self._store, views = flatten(parts, SIM_SCHEMA)
-        self._sets, self._warm, self._rep_i, self._rep_f = views[:2], *views[2:]
+        if n > len(keys):  # more rows than this model can make
+            raise ValueError(f"Sim.load: not a state of this model ({n} warm rows)")
+        for target, value in zip(self._sets[0], current, strict=True):
+            target[...] = value
+        keys[:n], lam[:n], count[0] = state.warm_key, state.warm_lam, n
         self._phase = 0
         self.time, self.steps = float(state.time), int(state.step)
         self._handed_back: StepReport | None = None  # the report of a step fast_step made
@@ -97,7 +103,7 @@ class Sim:
         fm = self._fm
         ins = _input_arrays(fm, inp) if fm.reason is None else None
         if ins is not None:
-            status, _ = _KERNEL[0](fm.flat, self._store, self._phase, ins)
+            status, _ = _KERNEL[0](self._flat, self._phase, ins)
             if status == OK:
                 self._phase ^= 1
                 self.time += self.model.options.h

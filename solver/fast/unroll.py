@@ -11,13 +11,18 @@ to right from 0.0, the same subtractions), so the results are bitwise those of t
 in ``solver.fast.tree``, which stay for the other block sizes (tests/solver/
 test_tree6.py checks both, and that tree6.py is what ``source()`` makes).
 
-    python -m solver.fast.unroll > solver/fast/tree6.py
+    python -m solver.fast.unroll    # rewrites solver/fast/tree6.py
+
+(The text is made before the file is replaced: a shell redirect would empty the file
+that importing solver.fast needs first.)
 
 Names: a{r}{c} the block read, l{r}{c} its factor (l{j}{j} the reciprocal of the
 diagonal, as tree._chol_block), y{r}{c} Y = L⁻¹ G, x{k} a right-hand side.
 """
 
 from __future__ import annotations
+
+from pathlib import Path
 
 N = 6
 DECORATOR = '@njit(cache=True, error_model="numpy")'
@@ -78,6 +83,32 @@ def eliminate6() -> str:
     return _function("eliminate6(i, p, sign, dm, y, g)", doc, body)
 
 
+def eliminate6_split() -> str:
+    """eliminate6 for a G whose upper-right 3×3 block is exactly zero (a body's block
+    against its joint's rows: the rheology rows have no linear part): that block of Y is
+    zero, and the terms with its entries, each exactly ±0, are left out of Y's lower
+    right block and of YᵀY.  Adding ±0 to a sum changes nothing but a zero's sign, so
+    the results are the loop's (the zeros' signs aside)."""
+    half = N // 2
+    body = [f"l{r}{c} = dm[i, {r}, {c}]" for r in range(N) for c in range(r + 1)]
+    for c in range(N):
+        for r in range(N):
+            if r < half <= c:
+                body.append(f"y[i, {r}, {c}] = 0.0")
+                continue
+            first = half if c >= half else 0
+            terms = [f"l{r}{k} * y{k}{c}" for k in range(first, r)]
+            body += _fold(f"g[{r}, {c}]", "-", terms)
+            body += [f"y{r}{c} = s * l{r}{r}", f"y[i, {r}, {c}] = y{r}{c}"]
+    for a in range(N):
+        for b in range(a + 1):
+            first = half if a >= half else 0
+            body += _fold("0.0", "+", [f"y{k}{a} * y{k}{b}" for k in range(first, N)])
+            body.append(f"dm[p, {a}, {b}] -= sign * s")
+    doc = "tree._eliminate of a 6×6 node into a 6×6 parent, G[:3, 3:] = 0 (unroll)."
+    return _function("eliminate6_split(i, p, sign, dm, y, g)", doc, body)
+
+
 def forward6() -> str:
     """tree._forward_block for m = 6: x[i] ← L⁻¹ x[i]."""
     body = []
@@ -116,9 +147,21 @@ def take_down6() -> str:
 
 def source() -> str:
     """The text of solver/fast/tree6.py."""
-    parts = (chol6(), eliminate6(), forward6(), backward6(), fold_up6(), take_down6())
+    parts = (chol6(), eliminate6(), eliminate6_split(), forward6(), backward6(), fold_up6(),
+             take_down6())  # fmt: skip
     return HEADER + "".join("\n\n" + p for p in parts)
 
 
+TARGET = Path(__file__).with_name("tree6.py")
+
+
+def write(path: Path = TARGET) -> None:
+    """Replace ``path`` with ``source()`` (through a file beside it, then a rename)."""
+    text = source()
+    spare = path.with_suffix(".py.new")
+    spare.write_text(text)
+    spare.replace(path)
+
+
 if __name__ == "__main__":
-    print(source(), end="")
+    write()

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 
+import numba
 import numpy as np
 import pytest
 import scipy.linalg
@@ -12,13 +13,16 @@ from rigbuild import chain, rheology
 
 from solver import collide, collide_box, collide_segment, quat
 from solver.fast.contacts import collide_pointer, collide_scene, world_shapes
+from solver.fast.flat import unflatten
 from solver.fast.narrow import segment_box, segment_segment
-from solver.fast.pack import pack
-from solver.fast.rows import row_arrays
+from solver.fast.pack import fast_model, pack
+from solver.fast.rows import LIMIT_SLACK, limit_rows, row_arrays
 from solver.fast.tree import dense_solve, node_rows, tree_solve
+from solver.joints import joint_frames
+from solver.joints import limit_rows as numpy_limit_rows
 from solver.model import build_model
 from solver.response import dense_system, regularize, row_response, world_inverse_inertia
-from solver.spec import BoneSpec, GroundSpec, PropSpec, RigSpec, ShapeSpec
+from solver.spec import BoneSpec, GroundSpec, LimitSpec, PropSpec, RigSpec, ShapeSpec
 from solver.state import initial_state
 from solver.step import build_rows
 from solver.touch import pointer_contacts
@@ -270,3 +274,70 @@ def test_qexp_series_equals_the_exact_exponential():
     assert np.abs(got[:, 0] - want[:, 0]).max() < 3e-16
     sine = np.linalg.norm(want[:, 1:], axis=1)  # sin(θ/2): the vector part, relatively
     assert (np.linalg.norm(got[:, 1:] - want[:, 1:], axis=1) / sine).max() < 3e-16
+
+
+def test_qlog_series_equals_the_exact_logarithm():
+    """kin.qlog's series branch (tan(θ/4) < 0.03) and its atan2 branch against numpy's
+    quat.log (arctan2 for every angle), across and at the switch, both hemispheres."""
+    from solver.fast.kin import LOG_SERIES, qlog
+
+    rng = np.random.default_rng(6)
+    axes = _unit_rows(rng, 3000)
+    at_switch = 4.0 * np.arctan(LOG_SERIES) * (1 + rng.uniform(-1e-6, 1e-6, 1000))
+    angles = np.concatenate((10.0 ** rng.uniform(-11, 0.4, 2000), at_switch))
+    q = quat.exp(axes * angles[:, None])
+    q[::2] *= -1.0  # the other hemisphere: the same rotation
+    got = np.array([qlog(_tup(v)) for v in q])
+    want = quat.log(q)
+    assert (np.linalg.norm(got - want, axis=1) / angles).max() < 6e-16  # ≤ 3 ulp
+
+
+@numba.njit
+def _fast_limit_rows(flat, body_quat, body_rot):
+    m, _, _, _, ws, _, opt, _ = unflatten(flat)
+    asleep = np.zeros(len(body_quat), dtype=np.bool_)
+    return limit_rows(m, body_quat, body_rot, opt[0], opt[1], opt[5], asleep, ws[0], 0)
+
+
+def _near(rng, edge: float, far: tuple[float, float]) -> float:
+    """An angle within 3·10⁻⁹ rad of ``edge`` (three times the thresholds' slack), or
+    anywhere in ``far``."""
+    if rng.random() < 0.7:
+        return edge + rng.uniform(-3.0, 3.0) * LIMIT_SLACK
+    return rng.uniform(*far)
+
+
+@pytest.mark.parametrize(
+    "limits",
+    [LimitSpec(0.6, (-0.4, 0.5)), LimitSpec(0.02, (-3.1, 3.13)), LimitSpec(2.9, (0.3, 0.35))],
+)
+def test_limit_rows_at_their_margins_equal_numpys(limits):
+    # Poses whose swing and twist sit within a few slacks of the margin from each bound
+    # (where the thresholds must not skip what the angles keep), and anywhere else; the
+    # compiled rows (thresholds, one angle per joint) must be numpy's (every angle).
+    model = build_model(chain(9, 0.001, root_mode="free", limits=limits))
+    fm, margin, rng = fast_model(model), model.options.limit_margin, np.random.default_rng(7)
+    lo, hi = limits.twist
+    made = skipped = 0
+    for _ in range(60):
+        q = [quat.normalize(rng.normal(size=4))]
+        for j in range(model.njoint):
+            d = model.joint_axis[j]
+            n = np.cross(d, rng.normal(size=3))
+            theta = _near(rng, limits.swing - margin, (0.0, limits.swing + 0.2))
+            edge = lo + margin if rng.random() < 0.5 else hi - margin
+            phi = _near(rng, edge, (lo - 0.1, hi + 0.1))
+            q_rel = quat.mul(quat.exp(theta * n / np.linalg.norm(n)), quat.exp(phi * d))
+            q.append(quat.normalize(quat.mul(q[model.joint_parent[j]], q_rel)))
+        body_quat = np.array(q)
+        body_rot = np.ascontiguousarray(quat.matrix(body_quat))
+        frames = joint_frames(model, model.body_pos0, body_quat, body_rot)
+        want = numpy_limit_rows(model, frames, 0.001)
+        n = _fast_limit_rows(fm.flat, body_quat, body_rot)
+        rw = fm.ws[0]
+        assert np.array_equal(rw[10][:n], want.key)
+        assert np.array_equal(rw[1][:n], want.body_b)
+        assert np.abs(rw[3][:n] - want.jac_b).max(initial=0.0) < 1e-12
+        assert np.abs(rw[7][:n] - want.bias).max(initial=0.0) < 1e-9
+        made, skipped = made + n, skipped + 3 * model.njoint - n
+    assert made > 100 and skipped > 100

@@ -4,6 +4,7 @@ contacts, monitor failures) must end the same way."""
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -16,7 +17,7 @@ from solver.errors import SimulationError
 from solver.fast import fast_step
 from solver.fast.sim import Sim
 from solver.model import build_model
-from solver.state import initial_state
+from solver.state import StepInput, initial_state
 
 DOLL = Path(__file__).resolve().parents[2] / "rigs" / "doll.yaml"
 FIELDS = (
@@ -81,3 +82,28 @@ def test_a_state_of_another_model_is_refused():
     small, large = build_model(chain(3, 0.01)), build_model(chain(5, 0.01))
     with pytest.raises(ValueError, match="not a state of this model"):
         Sim(small, initial_state(large))
+    rest = initial_state(small)
+    flat = replace(rest, body_vel=rest.body_vel[:, :1].copy())  # (nb, 1) would broadcast
+    with pytest.raises(ValueError, match="not a state of this model"):
+        Sim(small, flat)
+
+
+def test_two_sims_of_one_model_step_independently():
+    # Each Sim has its own copy of the packed model and its workspaces: two of one model
+    # stepped alternately, under different pushes, are each what it is alone.
+    model = build_model(chain(5, 0.005))
+    pushes = []
+    for k in range(2):
+        force = np.zeros((model.nbody, 3))
+        force[-1] = (3.0 * (k + 1), 0.0, -2.0 * k)
+        pushes.append(StepInput(body_force=force))
+    together = [Sim(model), Sim(model)]
+    for _ in range(50):
+        for sim, push in zip(together, pushes, strict=True):
+            sim.advance(push)
+    for sim, push in zip(together, pushes, strict=True):
+        alone = Sim(model)
+        for _ in range(50):
+            alone.advance(push)
+        assert same(sim.state, alone.state)
+    assert not same(together[0].state, together[1].state)

@@ -17,18 +17,50 @@ from solver.grip import Pointer
 from solver.model import build_model
 from solver.state import State, StepInput, initial_state
 from solver.step import step
-from solver.substep import SAFE_RATE, pointer_at, run_substeps, substeps_needed
+from solver.substep import SAFE_RATE, model_levers, pointer_at, run_substeps, substeps_needed
 
 
 def needed(model, state: State) -> int:
-    rot = quat.matrix(state.body_quat)
-    inertia_w = rot @ model.body_inertia @ np.swapaxes(rot, 1, 2)
     o = model.options
     return substeps_needed(
-        o.h, o.max_substeps, model.joint_parent, model.joint_bone, model.joint_anchor_parent,
-        model.joint_anchor_child, model.body_inv_mass, inertia_w, rot, state.warm_key,
-        state.warm_lam,
+        o.h, o.max_substeps, model.joint_parent, model.joint_bone, model.body_inv_mass,
+        model_levers(model), state.warm_key, state.warm_lam,
     )  # fmt: skip
+
+
+def needed_in_world(model, state: State) -> int:
+    """The module docstring's count written out in the world frame at the state's pose:
+    levers R_b r_j, world inertia R I Rᵀ and its least moment about the axes ⟂ the lever
+    from numpy's eigen-solver on the 2×2 block of that plane."""
+    rot = quat.matrix(state.body_quat)
+    inertia_w = rot @ model.body_inertia @ np.swapaxes(rot, 1, 2)
+    nj, movable = model.njoint, model.body_inv_mass > 0.0
+    f = np.zeros(nj)
+    for j in range(nj):
+        if 3 * j + 2 < len(state.warm_key) and state.warm_key[3 * j + 2] == 3 * j + 2:
+            f[j] = np.linalg.norm(state.warm_lam[3 * j : 3 * j + 3])
+    sides = lambda j: ((model.joint_parent[j], model.joint_anchor_parent[j]),  # noqa: E731
+                       (model.joint_bone[j], model.joint_anchor_child[j]))  # fmt: skip
+    k = np.zeros(model.nbody)
+    for j in range(nj):
+        for b, local in sides(j):
+            if b >= 0 and movable[b]:
+                k[b] += f[j] * np.linalg.norm(rot[b] @ local)
+    worst = 0.0
+    for j in range(nj):
+        if model.joint_parent[j] < 0 or not movable[model.joint_parent[j]]:
+            continue
+        if not movable[model.joint_bone[j]]:
+            continue
+        stiff = inertia = 0.0
+        for b, local in sides(j):
+            r = rot[b] @ local
+            plane = np.linalg.svd(r[None])[2][1:]  # two unit axes ⟂ r
+            stiff += k[b] / (r @ r)
+            inertia += np.linalg.eigvalsh(plane @ inertia_w[b] @ plane.T)[0] / (r @ r)
+        worst = max(worst, stiff / inertia)
+    n = math.ceil(model.options.h * math.sqrt(worst) / SAFE_RATE)
+    return max(1, min(model.options.max_substeps, n))
 
 
 def with_anchor_force(model, force: float) -> State:
@@ -52,6 +84,27 @@ def test_two_free_links_need_the_closed_form_count(target):
     assert needed(model, state) == target
     assert needed(model.with_options(max_substeps=3), state) == min(target, 3)
     assert needed(model.with_options(max_substeps=1), state) == 1
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_count_is_the_world_frame_count_at_any_pose(seed):
+    # The levers are made once, in the bodies' frames; the world-frame formula at a
+    # random pose of a random chain (links of 1–10 cm, random anchor forces spanning
+    # 1–30 substeps) must give the same count, step for step.
+    rng = np.random.default_rng(seed)
+    lengths = rng.uniform(0.01, 0.1, size=5).tolist()
+    model = build_model(chain(5, float(rng.uniform(0.002, 0.02)), root_mode="free",
+                              lengths=lengths))  # fmt: skip
+    model = model.with_options(max_substeps=64)
+    nj, counts = model.njoint, set()
+    for _ in range(40):
+        q = quat.normalize(rng.normal(size=(model.nbody, 4)))
+        lam = rng.normal(size=3 * nj) * 10.0 ** rng.uniform(-1, 4, size=3 * nj)
+        state = replace(initial_state(model), body_quat=q, warm_lam=lam,
+                        warm_key=np.arange(3 * nj, dtype=np.int64))  # fmt: skip
+        counts.add(needed(model, state))
+        assert needed(model, state) == needed_in_world(model, state)
+    assert len(counts) > 3  # the poses and forces span several counts
 
 
 def test_a_joint_to_the_world_has_no_tension_mode():

@@ -1,5 +1,6 @@
 """The written-out 6×6 kernels (solver.fast.tree6) against the loops of solver.fast.tree
-they replace for 6×6 blocks: bitwise equal on random blocks; and tree6.py is current."""
+they replace for 6×6 blocks: bitwise equal on random blocks (the split elimination on
+blocks with its zero corner); and tree6.py is current."""
 
 from __future__ import annotations
 
@@ -30,7 +31,8 @@ def _factored(rng, sign: float):
 
 def test_the_generated_file_is_current():
     path = Path(tree6.__file__)
-    assert path.read_text() == unroll.source(), "run: python -m solver.fast.unroll > " + str(path)
+    assert path == unroll.TARGET
+    assert path.read_text() == unroll.source(), "run: python -m solver.fast.unroll"
 
 
 @pytest.mark.parametrize("sign", [1.0, -1.0])
@@ -62,6 +64,26 @@ def test_eliminate6_is_the_loop_elimination_bitwise(sign):
         # and it is the elimination: D_p −= sign·Gᵀ (sign·D_i)⁻¹ G, on the lower triangle
         expected = parent - sign * g.T @ np.linalg.solve(sign * block, g)
         assert np.allclose(np.tril(dm[1]), np.tril(expected), rtol=1e-12, atol=1e-10)
+
+
+@pytest.mark.parametrize("sign", [1.0, -1.0])
+def test_the_split_elimination_is_the_loop_elimination_where_it_applies(sign):
+    # A G with a zero upper-right 3×3 block (both zeros' signs, as −J makes them): the
+    # split kernel equals the loop everywhere (== counts −0 and 0 as equal), and the
+    # factorisation picks it exactly for such blocks.
+    rng = np.random.default_rng(4)
+    for k in range(50):
+        dm, _ = _factored(rng, sign)
+        g = rng.normal(size=(6, 6))
+        g[:3, 3:] = 0.0 if k % 2 else -0.0
+        assert tree._upper_right_zero(g)
+        y = np.zeros((NODES, 6, 6))
+        dm2, y2 = dm.copy(), y.copy()
+        tree6.eliminate6_split(0, 1, sign, dm, y, g)
+        tree._eliminate(0, 1, 6, 6, sign, dm2, y2, g)
+        assert np.array_equal(dm, dm2) and np.array_equal(y, y2)
+        g[rng.integers(3), rng.integers(3, 6)] = 1e-300
+        assert not tree._upper_right_zero(g)
 
 
 def _same_in_place(x: np.ndarray, written, written_args: tuple, loops, loop_args: tuple) -> bool:
