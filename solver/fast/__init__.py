@@ -116,14 +116,12 @@ def _input_arrays(fm: FastModel, inp: StepInput) -> tuple | None:
             return None
         mode = MODE_TOUCH
     if mode == MODE_TOUCH and cpl is not None:  # a pointer that grips
-        if not 0 <= cpl.body < nb:
-            return None
-        if cpl is not fm.coupling[0]:
-            fm.coupling = (cpl, _coupling_vec(cpl))
-        cvec = fm.coupling[1]
-        if cvec.shape != (16,):
-            return None
-        mode, body, position_only = MODE_GRIP, cpl.body, bool(cpl.position_only)
+        if cpl is not fm.coupling[0]:  # checked once per Coupling (frozen)
+            cvec = _coupling_vec(cpl)
+            if not 0 <= cpl.body < nb or cvec.shape != (16,):
+                return None
+            fm.coupling = (cpl, cvec, (MODE_GRIP, cpl.body, bool(cpl.position_only)))
+        cvec, (mode, body, position_only) = fm.coupling[1], fm.coupling[2]
     flags = (mode, body, position_only, *loads)
     if flags != fm.flags:  # comparing costs a tenth of writing
         fm.ivec[:], fm.flags = flags, flags

@@ -81,7 +81,7 @@ class FastModel:
     rep_i: np.ndarray = field(default_factory=lambda: np.zeros(4, np.int64))
     flags: tuple = (0, 0, False, False, False)  # what ivec holds
     last: tuple = (None, None)  # (State fast_step returned last, its kernel arrays)
-    coupling: tuple = (None, None)  # (Coupling packed last, its packed array)
+    coupling: tuple = (None, None, None)  # (Coupling packed last, its array, its flags)
     pointer: tuple = ()
 
     def __post_init__(self) -> None:
