@@ -43,6 +43,7 @@ from solver.fast.post import (
     project,
     response,
     rheology_update,
+    row_response,
     state_ok,
 )
 from solver.fast.rows import ZERO, anchor_rows, flowing, is_null, limit_rows, rheology_rows
@@ -154,35 +155,18 @@ def build_rows(m, g, opt, iopt, st, rot, vel_free, inp, ws, asleep, awake):
 @njit(cache=True, error_model="numpy", inline="always")
 def regularize(rw, n, inv_mass, inv_i, h, eps):
     """comp ← ε·A_ii on every row without compliance of its own, A_ii = J_i h M⁻¹ J_iᵀ
-    from each side's response made in registers (the products and order of
-    ``response``, so bitwise what it stores; the stored responses are only made for the
-    rows a solver reads)."""
+    from each side's ``row_response`` in registers (what ``response`` stores, which is
+    made only for the rows a solver reads)."""
     if eps <= 0.0:
         return
     for i in range(n):
         if not rw[6][i] > 0.0:
             d = 0.0
-            ra = _row_response(rw[0], rw[2], i, inv_mass, inv_i, h)
-            rb = _row_response(rw[1], rw[3], i, inv_mass, inv_i, h)
+            ra = row_response(rw[0], rw[2], i, inv_mass, inv_i, h)
+            rb = row_response(rw[1], rw[3], i, inv_mass, inv_i, h)
             for k in range(6):
                 d += rw[2][i, k] * ra[k] + rw[3][i, k] * rb[k]
             rw[6][i] = eps * d
-
-
-@njit(cache=True, error_model="numpy")
-def _row_response(body, jac, i, inv_mass, inv_i, h):
-    """Row i's response on one side (``solver.fast.post.response``'s entries), or zeros."""
-    b = body[i]
-    if b < 0:
-        return (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-    s0 = inv_i[b, 0, 0] * jac[i, 3] + inv_i[b, 0, 1] * jac[i, 4]
-    s1 = inv_i[b, 1, 0] * jac[i, 3] + inv_i[b, 1, 1] * jac[i, 4]
-    s2 = inv_i[b, 2, 0] * jac[i, 3] + inv_i[b, 2, 1] * jac[i, 4]
-    return (
-        h * (inv_mass[b] * jac[i, 0]), h * (inv_mass[b] * jac[i, 1]),
-        h * (inv_mass[b] * jac[i, 2]), h * (s0 + inv_i[b, 0, 2] * jac[i, 5]),
-        h * (s1 + inv_i[b, 1, 2] * jac[i, 5]), h * (s2 + inv_i[b, 2, 2] * jac[i, 5]),
-    )  # fmt: skip
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -360,7 +344,7 @@ def step_kernel(flat, st, inp, out, rep_i, rep_f):
     nsub = substeps_needed(opt[0], iopt[6], m[0], m[1], m[16], m[20], st[8], st[9])
     if nsub > 1:
         rep_i[0] = nsub
-        return SUBSTEP, out, _no_keys(), np.empty(0), rep_i, rep_f
+        return _handed_back(SUBSTEP, out, rep_i, rep_f)
     for b in range(nb):
         qmatrix(quat_at(quat, b), rot, b)
         congruence(rot, b, m[18], b, inv_i, b)
@@ -384,7 +368,7 @@ def step_kernel(flat, st, inp, out, rep_i, rep_f):
         m, g, opt, iopt, st, rot, vel_free, inp, ws, asleep, awake
     )
     if n < 0:
-        return FALLBACK, out, _no_keys(), np.empty(0), rep_i, rep_f
+        return _handed_back(FALLBACK, out, rep_i, rep_f)
     t = tick(prof, on, 3, t + (prof[2] - joint_part))  # build_rows timed its joint rows (2)
     regularize(rw, n, m[16], inv_i, opt[0], opt[6])
     t = tick(prof, on, 4, t)
@@ -394,12 +378,12 @@ def step_kernel(flat, st, inp, out, rep_i, rep_f):
     )
     t = tick(prof, on, 5, t)
     if status or not state_ok(m, opt, pos, quat, vel[:, :3], vel[:, 3:]):
-        return FALLBACK, out, _no_keys(), np.empty(0), rep_i, rep_f
+        return _handed_back(FALLBACK, out, rep_i, rep_f)
     integrate(m, opt[0], pos, quat, vel, rot, asleep, out[0], out[1], out[3])
     if not project(m, ptree, pws, out[0], out[1], asleep):
-        return FALLBACK, out, _no_keys(), np.empty(0), rep_i, rep_f
+        return _handed_back(FALLBACK, out, rep_i, rep_f)
     if not state_ok(m, opt, out[0], out[1], vel[:, :3], out[3]):
-        return FALLBACK, out, _no_keys(), np.empty(0), rep_i, rep_f
+        return _handed_back(FALLBACK, out, rep_i, rep_f)
     out[2][:, :] = vel[:, :3]
     t = tick(prof, on, 6, t)
     rheology_update(m, opt, st, rw, n, lam, vel, ws[3], out[1], asleep, out[4:9])
@@ -415,9 +399,10 @@ def step_kernel(flat, st, inp, out, rep_i, rep_f):
 
 
 @njit(cache=True, error_model="numpy")
-def _no_keys():
-    """The warm keys of a step handed back (made only then: an allocation a step)."""
-    return np.empty(0, dtype=np.int64)
+def _handed_back(status, out, rep_i, rep_f):
+    """step_kernel's result for a step it hands back: no warm keys or λ (the empty
+    arrays made only then, not every step)."""
+    return status, out, np.empty(0, dtype=np.int64), np.empty(0), rep_i, rep_f
 
 
 @njit(cache=True, error_model="numpy", inline="always")

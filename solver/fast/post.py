@@ -164,15 +164,25 @@ def response(rw, start, n, inv_mass, inv_i, h, resp_a, resp_b):
 @njit(cache=True, error_model="numpy")
 def _response_side(body, jac, start, n, inv_mass, inv_i, h, out):
     for i in range(start, n):
-        b = body[i]
-        if b < 0:
-            out[i, :] = 0.0
-            continue
-        for k in range(3):
-            out[i, k] = h * (inv_mass[b] * jac[i, k])
-        for k in range(3):
-            s = inv_i[b, k, 0] * jac[i, 3] + inv_i[b, k, 1] * jac[i, 4]
-            out[i, 3 + k] = h * (s + inv_i[b, k, 2] * jac[i, 5])
+        r = row_response(body, jac, i, inv_mass, inv_i, h)
+        for k in range(6):
+            out[i, k] = r[k]
+
+
+@njit(cache=True, error_model="numpy")
+def row_response(body, jac, i, inv_mass, inv_i, h):
+    """Row i's h M⁻¹ jac on one side (zeros for the world)."""
+    b = body[i]
+    if b < 0:
+        return (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+    s0 = inv_i[b, 0, 0] * jac[i, 3] + inv_i[b, 0, 1] * jac[i, 4]
+    s1 = inv_i[b, 1, 0] * jac[i, 3] + inv_i[b, 1, 1] * jac[i, 4]
+    s2 = inv_i[b, 2, 0] * jac[i, 3] + inv_i[b, 2, 1] * jac[i, 4]
+    return (
+        h * (inv_mass[b] * jac[i, 0]), h * (inv_mass[b] * jac[i, 1]),
+        h * (inv_mass[b] * jac[i, 2]), h * (s0 + inv_i[b, 0, 2] * jac[i, 5]),
+        h * (s1 + inv_i[b, 1, 2] * jac[i, 5]), h * (s2 + inv_i[b, 2, 2] * jac[i, 5]),
+    )  # fmt: skip
 
 
 @njit(cache=True, error_model="numpy")

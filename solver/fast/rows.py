@@ -254,10 +254,10 @@ def limit_rows(m, quat, rot, h, erp, margin, asleep, rw, n):
 def limit_gaps(m, quat, asleep):
     """((nj, 3) C of the swing, twist-low and twist-high limits, (nj, 3) d' = q_rel d)
     of every awake joint (``limit_rows``).  A C that cannot be below the margin is +∞,
-    its angle not computed: an infinite limit (∞ minus any finite angle), or a joint
-    well inside its limits by the thresholds m[21] (``limit_thresholds``), which compare
-    d·d' and the twist's tangent without acos or atan2 and keep a 10⁻⁹ rad margin over
-    the rounding of either, so the rows made are exactly those the angles give."""
+    its angle not computed: a joint well inside its limits by the thresholds m[21]
+    (``limit_thresholds``: an infinite limit is never reached), which compare d·d' and
+    the twist's tangent without acos or atan2 and keep a 10⁻⁹ rad margin over the
+    rounding of either, so the rows made are exactly those the angles give."""
     parent, bone, axis_rest, swing, tw_lo, tw_hi = m[0], m[1], m[8], m[9], m[10], m[11]
     thresholds = m[21]
     nj = len(parent)
@@ -279,7 +279,7 @@ def limit_gaps(m, quat, asleep):
         along, w = q[1] * d[0] + q[2] * d[1] + q[3] * d[2], q[0]
         gaps[j, 1] = gaps[j, 2] = INF
         inside = w > 0.0 and along >= w * thresholds[j, 1] and along <= w * thresholds[j, 2]
-        if not inside and (tw_lo[j] != -INF or tw_hi[j] != INF):
+        if not inside:
             twist = _wrap(2.0 * math.atan2(along, w))
             gaps[j, 1], gaps[j, 2] = twist - tw_lo[j], tw_hi[j] - twist
     return gaps, turned
@@ -295,8 +295,9 @@ def limit_thresholds(swing, twist_lo, twist_hi, margin: float) -> np.ndarray:
     fall for a swing row to be possible (2: always possible; −2: never), and the
     tangents of half the twist range's inner bounds (lo + margin + slack)/2 and
     (hi − margin − slack)/2: with q_w > 0 the twist is 2 atan(s/q_w), so
-    q_w tan_lo ≤ s ≤ q_w tan_hi means neither twist row.  A half-angle within 10⁻⁶ of
-    ±π/2 (where the twist wraps at ±π) gets +∞ / −∞: no skip, the angle decides."""
+    q_w tan_lo ≤ s ≤ q_w tan_hi means neither twist row.  An infinite bound gets −∞ /
+    +∞ (never reached); a finite half-angle within 10⁻⁶ of ±π/2 (where the twist wraps
+    at ±π) gets +∞ / −∞: no skip, the angle decides."""
     a = swing - margin - LIMIT_SLACK
     cos_swing = np.where(a <= 0.0, 2.0, np.where(a >= np.pi, -2.0, np.cos(np.clip(a, 0, np.pi))))
     half_lo = 0.5 * (twist_lo + margin + LIMIT_SLACK)
@@ -305,4 +306,5 @@ def limit_thresholds(swing, twist_lo, twist_hi, margin: float) -> np.ndarray:
     with np.errstate(invalid="ignore"):
         tan_lo = np.where(np.abs(half_lo) < edge, np.tan(np.clip(half_lo, -edge, edge)), np.inf)
         tan_hi = np.where(np.abs(half_hi) < edge, np.tan(np.clip(half_hi, -edge, edge)), -np.inf)
-    return np.stack((cos_swing, tan_lo, tan_hi), axis=1).reshape(-1, 3)
+    tan_lo[twist_lo == -np.inf], tan_hi[twist_hi == np.inf] = -np.inf, np.inf
+    return np.stack((cos_swing, tan_lo, tan_hi), axis=1)

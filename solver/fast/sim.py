@@ -17,10 +17,9 @@ reads what it needs, ``sim.contacts``, ``sim.report``, ``sim.state``.
 On the doll's grip scene at h = 1 ms ``advance`` costs ~6 µs outside the kernel's own
 work (packing the input ~3, unboxing the 15 arrays ~1.6; ``step`` 3–5 µs more for the
 report), against ~35 µs for fast_step (docs/performance.md).  The states are exactly
-fast_step's
-(the same kernel); a step the kernel hands back (substeps, a box–box contact, a monitor
-failure, an unsupported model) runs through ``fast_step`` on a snapshot, so errors and
-results are the same too.
+fast_step's (the same kernel); a step the kernel hands back (substeps, a box–box
+contact, a monitor failure, an unsupported model) runs through ``fast_step`` on a
+snapshot, so errors and results are the same too.
 """
 
 from __future__ import annotations
@@ -56,7 +55,7 @@ class Sim:
         self.model = model
         self._fm = fm = fast_model(model)
         rest, nb, rows = initial_state(model), len(fm.zeros), len(fm.ws[0][0])
-        sets = tuple(tuple(np.zeros_like(_field(rest, f, nb)) for f in _FIELDS) for _ in "ab")
+        sets = tuple(tuple(np.zeros_like(_field(rest, f, nb)) for f in _FIELDS) for _ in range(2))
         warm = (np.zeros(rows, np.int64), np.zeros(rows), np.zeros(1, np.int64))
         packed = (fm.m, fm.g, fm.tree, fm.ptree, fm.ws, fm.pws, fm.opt, fm.iopt)
         parts = (*packed, *sets, warm, np.zeros(4, np.int64), np.zeros(10))

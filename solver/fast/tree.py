@@ -258,12 +258,12 @@ def tree_factor(seq, nseq, parent, nb, rw, rows, size, tw):
         p = parent[i]
         if p >= 0:
             _coupling(i, p, nb, rw, rows, size, g)
-            if m == 6 and size[p] == 6 and _upper_right_zero(g):
-                eliminate6_split(i, p, sign, dm, y, g)
-            elif m == 6 and size[p] == 6:
-                eliminate6(i, p, sign, dm, y, g)
-            else:
+            if m != 6 or size[p] != 6:
                 _eliminate(i, p, m, size[p], sign, dm, y, g)
+            elif _upper_right_zero(g):
+                eliminate6_split(i, p, sign, dm, y, g)
+            else:
+                eliminate6(i, p, sign, dm, y, g)
     return True
 
 

@@ -68,45 +68,33 @@ def chol6() -> str:
     return _function("chol6(dm, i, sign)", doc, body)
 
 
-def eliminate6() -> str:
-    """tree._eliminate for m = mp = 6: Y = L⁻¹ G, D_p −= sign·YᵀY (lower triangle)."""
+def eliminate6(split: bool = False) -> str:
+    """tree._eliminate for m = mp = 6: Y = L⁻¹ G, D_p −= sign·YᵀY (lower triangle).
+
+    split: for a G whose upper-right 3×3 block is exactly zero (a body's block against
+    its joint's rows: the rheology rows have no linear part), ``eliminate6_split``: that
+    block of Y is zero, and the terms with its entries, each exactly ±0, are left out of
+    Y's lower right block and of YᵀY.  Adding ±0 to a sum changes nothing but a zero's
+    sign, so the results are the loop's (the zeros' signs aside)."""
+    half = N // 2 if split else 0  # columns from `half` on have Y's first `half` rows zero
     body = [f"l{r}{c} = dm[i, {r}, {c}]" for r in range(N) for c in range(r + 1)]
     for c in range(N):
+        first = half if c >= half else 0
         for r in range(N):
-            body += _fold(f"g[{r}, {c}]", "-", [f"l{r}{k} * y{k}{c}" for k in range(r)])
-            body += [f"y{r}{c} = s * l{r}{r}", f"y[i, {r}, {c}] = y{r}{c}"]
-    for a in range(N):
-        for b in range(a + 1):
-            body += _fold("0.0", "+", [f"y{k}{a} * y{k}{b}" for k in range(N)])
-            body.append(f"dm[p, {a}, {b}] -= sign * s")
-    doc = "tree._eliminate of a 6×6 node into a 6×6 parent."
-    return _function("eliminate6(i, p, sign, dm, y, g)", doc, body)
-
-
-def eliminate6_split() -> str:
-    """eliminate6 for a G whose upper-right 3×3 block is exactly zero (a body's block
-    against its joint's rows: the rheology rows have no linear part): that block of Y is
-    zero, and the terms with its entries, each exactly ±0, are left out of Y's lower
-    right block and of YᵀY.  Adding ±0 to a sum changes nothing but a zero's sign, so
-    the results are the loop's (the zeros' signs aside)."""
-    half = N // 2
-    body = [f"l{r}{c} = dm[i, {r}, {c}]" for r in range(N) for c in range(r + 1)]
-    for c in range(N):
-        for r in range(N):
-            if r < half <= c:
+            if r < first:
                 body.append(f"y[i, {r}, {c}] = 0.0")
                 continue
-            first = half if c >= half else 0
-            terms = [f"l{r}{k} * y{k}{c}" for k in range(first, r)]
-            body += _fold(f"g[{r}, {c}]", "-", terms)
+            body += _fold(f"g[{r}, {c}]", "-", [f"l{r}{k} * y{k}{c}" for k in range(first, r)])
             body += [f"y{r}{c} = s * l{r}{r}", f"y[i, {r}, {c}] = y{r}{c}"]
     for a in range(N):
+        first = half if a >= half else 0
         for b in range(a + 1):
-            first = half if a >= half else 0
             body += _fold("0.0", "+", [f"y{k}{a} * y{k}{b}" for k in range(first, N)])
             body.append(f"dm[p, {a}, {b}] -= sign * s")
-    doc = "tree._eliminate of a 6×6 node into a 6×6 parent, G[:3, 3:] = 0 (unroll)."
-    return _function("eliminate6_split(i, p, sign, dm, y, g)", doc, body)
+    name = "eliminate6_split" if split else "eliminate6"
+    corner = ", G[:3, 3:] = 0 (unroll)" if split else ""
+    doc = f"tree._eliminate of a 6×6 node into a 6×6 parent{corner}."
+    return _function(f"{name}(i, p, sign, dm, y, g)", doc, body)
 
 
 def forward6() -> str:
@@ -147,7 +135,7 @@ def take_down6() -> str:
 
 def source() -> str:
     """The text of solver/fast/tree6.py."""
-    parts = (chol6(), eliminate6(), eliminate6_split(), forward6(), backward6(), fold_up6(),
+    parts = (chol6(), eliminate6(), eliminate6(split=True), forward6(), backward6(), fold_up6(),
              take_down6())  # fmt: skip
     return HEADER + "".join("\n\n" + p for p in parts)
 

@@ -309,24 +309,28 @@ def _near(rng, edge: float, far: tuple[float, float]) -> float:
 
 @pytest.mark.parametrize(
     "limits",
-    [LimitSpec(0.6, (-0.4, 0.5)), LimitSpec(0.02, (-3.1, 3.13)), LimitSpec(2.9, (0.3, 0.35))],
-)
+    [LimitSpec(0.6, (-0.4, 0.5)), LimitSpec(0.02, (-3.1, 3.13)), LimitSpec(2.9, (0.3, 0.35)),
+     LimitSpec(0.6), LimitSpec(twist=(-np.inf, 0.4))],
+)  # fmt: skip
 def test_limit_rows_at_their_margins_equal_numpys(limits):
-    # Poses whose swing and twist sit within a few slacks of the margin from each bound
-    # (where the thresholds must not skip what the angles keep), and anywhere else; the
-    # compiled rows (thresholds, one angle per joint) must be numpy's (every angle).
+    # Poses whose swing and twist sit within a few slacks of the margin from each finite
+    # bound (where the thresholds must not skip what the angles keep), and anywhere else
+    # (an infinite bound is never reached); the compiled rows (thresholds, one angle
+    # per joint) must be numpy's (every angle).
     model = build_model(chain(9, 0.001, root_mode="free", limits=limits))
     fm, margin, rng = fast_model(model), model.options.limit_margin, np.random.default_rng(7)
     lo, hi = limits.twist
+    twist_edges = [b for b in (lo + margin, hi - margin) if np.isfinite(b)] or [0.0]
+    swing_edge = limits.swing - margin if np.isfinite(limits.swing) else 1.0
     made = skipped = 0
     for _ in range(60):
         q = [quat.normalize(rng.normal(size=4))]
         for j in range(model.njoint):
             d = model.joint_axis[j]
             n = np.cross(d, rng.normal(size=3))
-            theta = _near(rng, limits.swing - margin, (0.0, limits.swing + 0.2))
-            edge = lo + margin if rng.random() < 0.5 else hi - margin
-            phi = _near(rng, edge, (lo - 0.1, hi + 0.1))
+            theta = _near(rng, swing_edge, (0.0, min(limits.swing + 0.2, 3.0)))
+            edge = twist_edges[rng.integers(len(twist_edges))]
+            phi = _near(rng, edge, (max(lo, -3.0) - 0.1, min(hi, 3.0) + 0.1))
             q_rel = quat.mul(quat.exp(theta * n / np.linalg.norm(n)), quat.exp(phi * d))
             q.append(quat.normalize(quat.mul(q[model.joint_parent[j]], q_rel)))
         body_quat = np.array(q)

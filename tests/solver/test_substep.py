@@ -17,15 +17,7 @@ from solver.grip import Pointer
 from solver.model import build_model
 from solver.state import State, StepInput, initial_state
 from solver.step import step
-from solver.substep import SAFE_RATE, model_levers, pointer_at, run_substeps, substeps_needed
-
-
-def needed(model, state: State) -> int:
-    o = model.options
-    return substeps_needed(
-        o.h, o.max_substeps, model.joint_parent, model.joint_bone, model.body_inv_mass,
-        model_levers(model), state.warm_key, state.warm_lam,
-    )  # fmt: skip
+from solver.substep import SAFE_RATE, model_substeps, pointer_at, run_substeps
 
 
 def needed_in_world(model, state: State) -> int:
@@ -81,9 +73,9 @@ def test_two_free_links_need_the_closed_form_count(target):
     omega = (target - 0.5) * SAFE_RATE / model.options.h
     force = omega**2 * 2.0 * transverse / 0.1
     state = with_anchor_force(model, force)
-    assert needed(model, state) == target
-    assert needed(model.with_options(max_substeps=3), state) == min(target, 3)
-    assert needed(model.with_options(max_substeps=1), state) == 1
+    assert model_substeps(model, state) == target
+    assert model_substeps(model.with_options(max_substeps=3), state) == min(target, 3)
+    assert model_substeps(model.with_options(max_substeps=1), state) == 1
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -102,15 +94,15 @@ def test_the_count_is_the_world_frame_count_at_any_pose(seed):
         lam = rng.normal(size=3 * nj) * 10.0 ** rng.uniform(-1, 4, size=3 * nj)
         state = replace(initial_state(model), body_quat=q, warm_lam=lam,
                         warm_key=np.arange(3 * nj, dtype=np.int64))  # fmt: skip
-        counts.add(needed(model, state))
-        assert needed(model, state) == needed_in_world(model, state)
+        counts.add(model_substeps(model, state))
+        assert model_substeps(model, state) == needed_in_world(model, state)
     assert len(counts) > 3  # the poses and forces span several counts
 
 
 def test_a_joint_to_the_world_has_no_tension_mode():
     # One link hanging from a fixed stand by its joint: the anchor cannot move sideways.
     model = build_model(chain(1, 0.05, root_mode="ball"))
-    assert needed(model, with_anchor_force(model, 1e6)) == 1
+    assert model_substeps(model, with_anchor_force(model, 1e6)) == 1
 
 
 def test_pointer_moves_back_along_its_mean_velocity():
