@@ -78,10 +78,7 @@ def collide_scene(g, centre, rot, margin, cb, cull, awake):
         f, s = pair_f[p], pair_s[p]
         if not ((body_a[p] >= 0 and awake[body_a[p]]) or (body_b[p] >= 0 and awake[body_b[p]])):
             continue
-        offset = sub(vec(centre, s), vec(centre, f))
-        plane = kind[f] == PLANE
-        gap = dot(offset, column(rot, f, 1)) if plane else norm(offset) - bound[f]
-        if cull and not gap - bound[s] <= margin:
+        if cull and not _within_reach(kind[f] == PLANE, centre, rot, f, s, bound, margin):
             continue
         ctx = (body_a[p], body_b[p], mu[p], sign[p], p * 16)
         grp = group[p]
@@ -100,6 +97,17 @@ def collide_scene(g, centre, rot, margin, cb, cull, awake):
         else:
             return -1
     return n
+
+
+@njit(cache=True, error_model="numpy")
+def _within_reach(plane, centre, rot, f, s, bound, margin):
+    """Shape s's bounding sphere within the margin of shape f's (or of f's plane): for
+    two spheres |offset| ≤ r_f + r_s + margin, compared squared (no square root)."""
+    offset = sub(vec(centre, s), vec(centre, f))
+    if plane:
+        return dot(offset, column(rot, f, 1)) - bound[s] <= margin
+    reach = bound[f] + bound[s] + margin
+    return dot(offset, offset) <= reach * reach
 
 
 @njit(cache=True, error_model="numpy")

@@ -24,7 +24,9 @@ from numba import njit
 from solver import hybrid
 from solver.fast.post import apply_rows
 from solver.fast.tree import (
+    backward_pass,
     forest_sequence,
+    forward_pass,
     init_nodes,
     init_rhs,
     row_velocity,
@@ -97,12 +99,15 @@ def _schur(rw, its, nu, seq, nseq, parent, nb, size, tw, movable, x):
 
 
 @njit(cache=True, error_model="numpy")
-def _solve_exact(seq, nseq, parent, nb, movable, rows, size, tw, vel, lam, out):
+def _solve_exact(seq, nseq, parent, nb, movable, rows, size, tw, vel, lam, out, forward):
     """λ of the forest's rows and out = vel + y, with v_free replaced by ``vel``, from
-    the right-hand sides of ``vel`` in tw[2] (init_nodes or init_rhs made them)."""
+    the right-hand sides of ``vel`` in tw[2] (init_rhs made them; forward False: init_nodes
+    made them and tree_factor has run the forward pass)."""
     x = tw[2]
     every = np.zeros(len(parent), np.int64)
-    tree_substitute(seq, nseq, parent, nb, size, tw, x, every, 0, every, 0)
+    if forward:
+        forward_pass(seq, nseq, parent, nb, size, tw, x, every, 0)
+    backward_pass(seq, nseq, parent, nb, size, tw, x, every, 0)
     for b in range(nb):
         for k in range(6):
             out[b, k] = vel[b, k]
@@ -148,18 +153,20 @@ def _iterate(rw, its, nu, s_vec, lam0, iterations):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _round(m, tree, ws, opt, rw, n, lam, vel_p, its, nu, grips, lam0, iters, asleep):
+def _round(bw, tree, h, rw, n, lam, vel_p, its, nu, grips, lam0, iters, asleep):
     """One solve with the current sets: (ok, v, sweeps, residual); fills λ.
-    grips = (free grip rows, their count, the gripped body)."""
+    bw: the solvers' model arrays (solver.fast.kernel.solve); grips = (free grip rows,
+    their count, the gripped body)."""
     _, parent, _, _, seq, rows, size, tw = tree
-    nb, movable = len(vel_p), m[16]
+    joint_bone, mass, movable, resp_a, resp_b, _, inertia_w = bw
+    nb = len(vel_p)
     free_grip, ngrip, body = grips
-    nseq = forest_sequence(tree, nb, movable, free_grip, ngrip, body, asleep, m[1])
-    init_nodes(seq, nseq, nb, rw, vel_p, opt[0], m[15], ws[7], rows, size, tw[0], tw[2])
+    nseq = forest_sequence(tree, nb, movable, free_grip, ngrip, body, asleep, joint_bone)
+    init_nodes(seq, nseq, nb, rw, vel_p, h, mass, inertia_w, rows, size, tw[0], tw[2])
     vel = np.empty_like(vel_p)
     if not tree_factor(seq, nseq, parent, nb, rw, rows, size, tw):
         return False, vel, 0, 0.0
-    _solve_exact(seq, nseq, parent, nb, movable, rows, size, tw, vel_p, lam, vel)
+    _solve_exact(seq, nseq, parent, nb, movable, rows, size, tw, vel_p, lam, vel, False)
     if nu == 0:
         return True, vel, 0, 0.0
     s_vec = np.empty(nu)
@@ -173,17 +180,18 @@ def _round(m, tree, ws, opt, rw, n, lam, vel_p, its, nu, grips, lam0, iters, asl
         lam[its[i]] = lam_u[i]
         chosen[its[i]] = True
     pushed = vel_p.copy()
-    apply_rows(rw, chosen, ws[1], ws[2], lam, pushed)
+    apply_rows(rw, chosen, resp_a, resp_b, lam, pushed)
     init_rhs(seq, nseq, nb, rw, pushed, rows, size, tw[2])
-    _solve_exact(seq, nseq, parent, nb, movable, rows, size, tw, pushed, lam, vel)
+    _solve_exact(seq, nseq, parent, nb, movable, rows, size, tw, pushed, lam, vel, True)
     return True, vel, sweeps, residual
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def hybrid_solve(m, tree, ws, opt, rw, n, ne, vel_free, lam0, iterations, grip, skip, asleep):
+def hybrid_solve(bw, tree, h, rw, n, ne, vel_free, lam0, iterations, grip, skip, asleep):
     """(ok, λ, v, sweeps, residual) as solver.hybrid.hybrid_solve; ok False when the
-    exact system is degenerate; ``skip``: leave dormant rows out of the iteration;
-    asleep (nb,) bool: sleeping bodies (their islands are not in the forest)."""
+    exact system is degenerate; bw: the solvers' model arrays (solver.fast.kernel.solve);
+    h: the step; ``skip``: leave dormant rows out of the iteration; asleep (nb,) bool:
+    sleeping bodies (their islands are not in the forest)."""
     grip0, ngrip, body = grip
     dormant = dormant_rows(rw, n, lam0) if skip else np.zeros(n, dtype=np.bool_)
     at_lo, at_hi = np.zeros(n, dtype=np.bool_), np.zeros(n, dtype=np.bool_)
@@ -203,9 +211,9 @@ def hybrid_solve(m, tree, ws, opt, rw, n, ne, vel_free, lam0, iterations, grip, 
                 its[nu], nu = i, nu + 1
         vel_p = vel_free.copy()
         if pinned:  # (none in most rounds: nothing to add)
-            apply_rows(rw, at_lo | at_hi, ws[1], ws[2], lam, vel_p)
+            apply_rows(rw, at_lo | at_hi, bw[3], bw[4], lam, vel_p)
         ok, vel, sweeps, residual = _round(
-            m, tree, ws, opt, rw, n, lam, vel_p, its, nu, (free_grip, nfree, body), lam0,
+            bw, tree, h, rw, n, lam, vel_p, its, nu, (free_grip, nfree, body), lam0,
             iterations, asleep,
         )  # fmt: skip
         if not ok:

@@ -84,11 +84,11 @@ def tick(prof, on, stage, t0):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def free_velocity(m, opt, st, inv_i, inp, out):
-    """(nb,6) velocities after gravity and external loads, before constraints."""
-    vel, omega = st[2], st[3]
-    force, torque, ivec = inp[0], inp[1], inp[4]
-    inv_mass, h = m[16], opt[0]
+def free_velocity(inv_mass, opt, vel, omega, inv_i, loads, out):
+    """(nb,6) velocities after gravity and external loads (force, torque, flags: the
+    input's inp[0], inp[1], inp[4]), before constraints."""
+    force, torque, ivec = loads
+    h = opt[0]
     for b in range(len(vel)):
         tau = matvec(inv_i, b, (torque[b, 0], torque[b, 1], torque[b, 2]))
         for k in range(3):
@@ -100,7 +100,7 @@ def free_velocity(m, opt, st, inv_i, inp, out):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def build_rows(m, g, opt, iopt, st, rot, vel_free, inp, ws, asleep, awake):
+def build_rows(m, joints, rheo, g, opt, iopt, st, rot, vel_free, inp, ws, asleep, awake):
     """Fill the row table; returns (rows, scene contacts, first grip row, grip rows), or
     rows = −1 when a box–box pair is within reach.  The shapes' world frames (ws[8],
     ws[9]) are already computed; asleep/awake (nb,) bool: sleeping bodies and the awake
@@ -111,9 +111,9 @@ def build_rows(m, g, opt, iopt, st, rot, vel_free, inp, ws, asleep, awake):
     h = opt[0]
     prof, on = ws[10], iopt[7]
     t = cycles() if on else 0
-    n = anchor_rows(m, pos, rot, st[3], h, opt[1], True, asleep, rw, 0)
+    n = anchor_rows(joints, pos, rot, st[3], h, opt[1], True, asleep, rw, 0)
     if iopt[3]:
-        n = rheology_rows(m, quat, rot, h, st[4], st[5], st[6], asleep, rheo_joint, rw, n)
+        n = rheology_rows(rheo, quat, rot, h, st[4], st[5], st[6], asleep, rheo_joint, rw, n)
     if iopt[4]:
         n = limit_rows(m, quat, rot, h, opt[1], opt[5], asleep, rw, n)
     tick(prof, on, 2, t)
@@ -170,12 +170,12 @@ def regularize(rw, n, inv_mass, inv_i, h, eps):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def warm_start(opt, iopt, st, rw, n):
+def warm_start(opt, iopt, warm, rw, n):
     """Last step's λ of rows with the same key × factor.  The keys are sorted and the rows
     are made nearly in key order, so the key after the last one found is tried first
     (a binary search otherwise)."""
     lam = np.zeros(n)
-    keys, values, row_key = st[8], st[9], rw[10]
+    (keys, values), row_key = warm, rw[10]
     if not iopt[2] or len(keys) == 0:
         return lam
     at = -1  # where the last key was found
@@ -193,19 +193,17 @@ def warm_start(opt, iopt, st, rw, n):
 
 
 @njit(cache=True, error_model="numpy")
-def _tree_pass(m, tree, ws, opt, rw, vel_free, free_grip, ngrip, body, asleep, lam):
+def _tree_pass(bw, tree, h, rw, vel_free, free_grip, ngrip, body, asleep, lam):
     """λ of the joint rows and the free grip rows by the tree elimination (pinned rows'
     forces are already in vel_free); False when the system is degenerate."""
     _, parent, _, _, seq, rows, size, tw = tree
     nb = len(vel_free)
-    nseq = forest_sequence(tree, nb, m[16], free_grip, ngrip, body, asleep, m[1])
-    return tree_solve(
-        seq, nseq, parent, nb, rw, vel_free, opt[0], m[15], ws[7], rows, size, tw, lam
-    )
+    nseq = forest_sequence(tree, nb, bw[2], free_grip, ngrip, body, asleep, bw[0])
+    return tree_solve(seq, nseq, parent, nb, rw, vel_free, h, bw[1], bw[6], rows, size, tw, lam)
 
 
 @njit(cache=True, error_model="numpy")
-def direct(m, tree, ws, opt, rw, n, vel_free, grip, asleep):
+def direct(bw, tree, h, rw, n, vel_free, grip, asleep):
     """(code, λ, v, residual) as solver.direct.direct_solve: a primal active set on the
     box-QP.  Rows pinned at a bound (at_lo/at_hi) have their force folded into v_free and
     the free rows are solved by the tree; a pinned row is released when its residual
@@ -226,11 +224,11 @@ def direct(m, tree, ws, opt, rw, n, vel_free, grip, asleep):
             else:
                 free_grip[nfree], nfree = i, nfree + 1
         vel = vel_free.copy()
-        apply_rows(rw, at_lo | at_hi, ws[1], ws[2], lam, vel)
-        if not _tree_pass(m, tree, ws, opt, rw, vel, free_grip, nfree, body, asleep, lam):
+        apply_rows(rw, at_lo | at_hi, bw[3], bw[4], lam, vel)
+        if not _tree_pass(bw, tree, h, rw, vel, free_grip, nfree, body, asleep, lam):
             return 2, lam, vel, 0.0
         vel = vel_free.copy()
-        apply(rw, n, ws[1], ws[2], lam, vel)
+        apply(rw, n, bw[3], bw[4], lam, vel)
         changed, residual = False, 0.0
         for i in range(n):
             r[i] = row_velocity(rw, i, vel) + rw[6][i] * lam[i] + rw[7][i]
@@ -250,12 +248,16 @@ def direct(m, tree, ws, opt, rw, n, vel_free, grip, asleep):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def solve(m, tree, ws, opt, iopt, st, n, vel_free, grip, asleep):
+def solve(bw, tree, rw, opt, iopt, warm, n, vel_free, grip, asleep):
     """(status, λ, v, iterations, residual, solver) as solver.step.solve.  The row
-    responses (ws[1], ws[2]) are made here, for the rows the solver reads: all of them
+    responses (bw[3], bw[4]) are made here, for the rows the solver reads: all of them
     for the direct and PGS solves, only the bounded ones (after the joints') for the
-    hybrid, whose joint rows the tree solves from their Jacobians."""
-    rw = ws[0]
+    hybrid, whose joint rows the tree solves from their Jacobians.
+
+    bw: the model arrays the solvers read (joint_bone, mass, inverse mass, row responses
+    a and b, world inverse inertia, world inertia: m[1], m[15], m[16], ws[1], ws[2],
+    ws[6], ws[7]), a few arrays rather than all of m and ws, since every array handed to
+    an inlined part costs two reference-count calls; warm: the last step's (keys, λ)."""
     lo, hi, fric, kind = rw[4], rw[5], rw[8], rw[11]
     bilateral = True
     for i in range(n):
@@ -266,12 +268,12 @@ def solve(m, tree, ws, opt, iopt, st, n, vel_free, grip, asleep):
     ne = 0
     while hybrid and ne < n and kind[ne] <= KIND_RHEOLOGY:
         ne += 1
-    response(rw, ne, n, m[16], ws[6], opt[0], ws[1], ws[2])
-    lam0 = warm_start(opt, iopt, st, rw, n)
+    response(rw, ne, n, bw[2], bw[5], opt[0], bw[3], bw[4])
+    lam0 = warm_start(opt, iopt, warm, rw, n)
     if method == METHOD_DIRECT or (method == METHOD_AUTO and bilateral):
         if not bilateral:
             return FALLBACK, lam0, vel_free, 0, 0.0, SOLVER_DIRECT
-        code, lam, vel, residual = direct(m, tree, ws, opt, rw, n, vel_free, grip, asleep)
+        code, lam, vel, residual = direct(bw, tree, opt[0], rw, n, vel_free, grip, asleep)
         if code == 2:
             return FALLBACK, lam, vel, 0, 0.0, SOLVER_DIRECT
         if code == 0:
@@ -279,7 +281,7 @@ def solve(m, tree, ws, opt, iopt, st, n, vel_free, grip, asleep):
         lam0 = lam
     if hybrid:
         ok, lam, vel, sweeps, residual = hybrid_solve(
-            m, tree, ws, opt, rw, n, ne, vel_free, lam0, iopt[1], grip, iopt[9], asleep
+            bw, tree, opt[0], rw, n, ne, vel_free, lam0, iopt[1], grip, iopt[9], asleep
         )
         if not ok:
             return FALLBACK, lam, vel, 0, 0.0, SOLVER_HYBRID
@@ -289,8 +291,8 @@ def solve(m, tree, ws, opt, iopt, st, n, vel_free, grip, asleep):
         rw[1][:n],
         rw[2][:n],
         rw[3][:n],
-        ws[1][:n],
-        ws[2][:n],
+        bw[3][:n],
+        bw[4][:n],
         rw[4][:n],
         rw[5][:n],
         rw[6][:n],
@@ -336,6 +338,10 @@ def step_kernel(flat, st, inp, out, rep_i, rep_f):
     pos, quat = st[0], st[1]
     nb = len(pos)
     rw, rot, inv_i, inertia_w = ws[0], ws[5], ws[6], ws[7]
+    # The parts below get the few arrays of m they read, not all 22: every array handed
+    # to an inlined part costs two reference-count calls (see solve).
+    joints = (m[0], m[1], m[2], m[3])  # parents, bones, anchors (post._gap2)
+    rheo = (m[0], m[1], m[4], m[5], m[6], m[7], m[12], m[13], m[14])  # post.rheology_update
     out[5][:] = False
     rep_i[:] = 0
     rep_f[:] = 0
@@ -352,20 +358,20 @@ def step_kernel(flat, st, inp, out, rep_i, rep_f):
     if iopt[5] or inp[4][0] == MODE_TOUCH or iopt[10]:
         world_shapes(g, pos, quat, ws[8], ws[9])
     asleep, fresh = out[9], np.zeros(nb, dtype=np.bool_)
-    wake(m, g, opt, iopt, st, inp, ws[8], out[9], out[10], fresh)
+    wake(m[19], (g[0], g[6], g[7], g[8]), opt, iopt, st, inp, ws[8], out[9], out[10], fresh)
     awake, movable = np.empty(nb, dtype=np.bool_), m[16]
     for b in range(nb):
         awake[b] = movable[b] > 0.0 and not asleep[b]
     t = tick(prof, on, 0, t)
     vel_free = np.empty((nb, 6))
-    free_velocity(m, opt, st, inv_i, inp, vel_free)
+    free_velocity(m[16], opt, st[2], st[3], inv_i, (inp[0], inp[1], inp[4]), vel_free)
     for b in range(nb):
         if asleep[b]:
             vel_free[b, :] = 0.0
     t = tick(prof, on, 1, t)
     joint_part = prof[2]
     n, ncontact, grip0, ngrip = build_rows(
-        m, g, opt, iopt, st, rot, vel_free, inp, ws, asleep, awake
+        m, joints, rheo, g, opt, iopt, st, rot, vel_free, inp, ws, asleep, awake
     )
     if n < 0:
         return _handed_back(FALLBACK, out, rep_i, rep_f)
@@ -373,23 +379,25 @@ def step_kernel(flat, st, inp, out, rep_i, rep_f):
     regularize(rw, n, m[16], inv_i, opt[0], opt[6])
     t = tick(prof, on, 4, t)
     grip = (grip0, ngrip, inp[4][1])
+    bw = (m[1], m[15], m[16], ws[1], ws[2], inv_i, inertia_w)
     status, lam, vel, iters, residual, used = solve(
-        m, tree, ws, opt, iopt, st, n, vel_free, grip, asleep
+        bw, tree, rw, opt, iopt, (st[8], st[9]), n, vel_free, grip, asleep
     )
     t = tick(prof, on, 5, t)
-    if status or not state_ok(m, opt, pos, quat, vel[:, :3], vel[:, 3:]):
+    if status or not state_ok(joints, opt, pos, quat, vel[:, :3], vel[:, 3:]):
         return _handed_back(FALLBACK, out, rep_i, rep_f)
-    integrate(m, opt[0], pos, quat, vel, rot, asleep, out[0], out[1], out[3])
+    integrate(m[17], m[18], opt[0], pos, quat, vel, rot, asleep, out[0], out[1], out[3])
     if not project(m, ptree, pws, out[0], out[1], asleep):
         return _handed_back(FALLBACK, out, rep_i, rep_f)
-    if not state_ok(m, opt, out[0], out[1], vel[:, :3], out[3]):
+    if not state_ok(joints, opt, out[0], out[1], vel[:, :3], out[3]):
         return _handed_back(FALLBACK, out, rep_i, rep_f)
     out[2][:, :] = vel[:, :3]
     t = tick(prof, on, 6, t)
-    rheology_update(m, opt, st, rw, n, lam, vel, ws[3], out[1], asleep, out[4:9])
+    rheology_update(rheo, opt, st[4:8], rw, n, lam, vel, ws[3], out[1], asleep, out[4:9])
     if iopt[10]:
-        settle(m[19], asleep, out[10], out[2], out[3], m[1], flowing_joints(m, out[5]), opt[0],
-               opt[15], opt[16], opt[17], fresh)  # fmt: skip
+        flows = flowing_joints(m[7], m[13], m[14], out[5])
+        settle(m[19], asleep, out[10], out[2], out[3], m[1], flows, opt[0], opt[15], opt[16],
+               opt[17], fresh)  # fmt: skip
     keys, values = warm_table(rw, n, lam)
     rep_i[0], rep_i[1], rep_i[2], rep_i[3] = len(keys), ncontact, iters, used
     rep_f[0] = residual
@@ -427,9 +435,11 @@ def warm_table(rw, n, lam):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def wake(m, g, opt, iopt, st, inp, centre, asleep, still, fresh):
+def wake(island, shapes, opt, iopt, st, inp, centre, asleep, still, fresh):
     """asleep, still (nb,) ← the state's, then wake what this step touches (solver.sleep:
-    loads, the grip, a free pointer, moving neighbours); all awake when sleeping is off."""
+    loads, the grip, a free pointer, moving neighbours); all awake when sleeping is off.
+    island: m[19]; shapes: the geometry's shape bodies, bounds and pairs (g[0], g[6],
+    g[7], g[8])."""
     nb, was_asleep, was_still = len(asleep), st[10], st[11]
     for b in range(nb):
         asleep[b], still[b] = (was_asleep[b], was_still[b]) if iopt[10] else (False, 0.0)
@@ -447,14 +457,16 @@ def wake(m, g, opt, iopt, st, inp, centre, asleep, still, fresh):
             pointer[k] = pvec[k] - opt[0] * pvec[7 + k]
         pointer[3] = pvec[13]
     grip_body = ivec[1] if ivec[0] == MODE_GRIP else -1
-    touch(m[19], asleep, still, fresh, loaded, grip_body, pointer, centre, g[6], g[0], g[7],
-          g[8], opt[4], st[2], st[3], opt[15], opt[16])  # fmt: skip
+    shape_body, bound, pair_f, pair_s = shapes
+    touch(island, asleep, still, fresh, loaded, grip_body, pointer, centre, bound, shape_body,
+          pair_f, pair_s, opt[4], st[2], st[3], opt[15], opt[16])  # fmt: skip
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def flowing_joints(m, yielded):
-    """(nj,) bool: joints with rheology on the three-element rows (solver.joints.flowing)."""
-    nj, has, plastic, finite_yield = len(m[0]), m[7], m[13], m[14]
+def flowing_joints(has, plastic, finite_yield, yielded):
+    """(nj,) bool: joints with rheology on the three-element rows (solver.joints.flowing);
+    has, plastic, finite_yield: m[7], m[13], m[14]."""
+    nj = len(has)
     out = np.zeros(nj, dtype=np.bool_)
     for j in range(nj):
         out[j] = has[j] and flowing(plastic, finite_yield, yielded, j)

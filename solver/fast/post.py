@@ -23,6 +23,7 @@ from numba import njit
 from solver.fast.kin import (
     add,
     congruence,
+    dot,
     matvec,
     neg,
     norm,
@@ -61,7 +62,7 @@ def _omega_from_momentum(q, mom, inv_inertia, b, rot):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def integrate(m, h, pos, quat, vel, rot, asleep, out_pos, out_quat, out_omega):
+def integrate(inertia, inv_inertia, h, pos, quat, vel, rot, asleep, out_pos, out_quat, out_omega):
     """Semi-implicit Euler in momentum form with the implicit midpoint rotation rate.
     rot (nb,3,3) holds R(q[t]) on entry and R(q[t+1]) on return.  Sleeping bodies
     (asleep (nb,) bool) keep their pose, at rest.
@@ -70,7 +71,6 @@ def integrate(m, h, pos, quat, vel, rot, asleep, out_pos, out_quat, out_omega):
     independent, so the processor overlaps them; body by body it waits on each pass's
     latency), and a body's passes stop once one returns its rate unchanged: every later
     pass would repeat it exactly, so the result is bit for bit that of all passes."""
-    inertia, inv_inertia = m[17], m[18]
     nb = len(pos)
     rates, moms, done = np.empty((nb, 3)), np.empty((nb, 3)), np.empty(nb, np.bool_)
     for b in range(nb):
@@ -105,52 +105,49 @@ def integrate(m, h, pos, quat, vel, rot, asleep, out_pos, out_quat, out_omega):
 
 
 @njit(cache=True, error_model="numpy")
-def joint_gaps(m, pos, quat):
-    """(largest anchor distance (m), its joint) at the pose."""
-    worst, at = 0.0, 0
-    for j in range(len(m[0])):
-        gap = _gap(m, pos, quat, j)
-        if gap > worst or j == 0:
-            worst, at = gap, j
-    return worst, at
-
-
-@njit(cache=True, error_model="numpy")
-def _gap(m, pos, quat, j):
-    """Joint j's anchor distance (m)."""
-    p, c, anc_p, anc_c = m[0][j], m[1][j], m[2], m[3]
+def _gap2(joints, pos, quat, j):
+    """The square of joint j's anchor distance (m²); joints: the model's joint parents,
+    bones and anchors (m[0], m[1], m[2], m[3])."""
+    p, c, anc_p, anc_c = joints[0][j], joints[1][j], joints[2], joints[3]
     a = add(vec(pos, p), qrotate(quat_at(quat, p), vec(anc_p, j))) if p >= 0 else vec(anc_p, j)
-    b = add(vec(pos, c), qrotate(quat_at(quat, c), vec(anc_c, j)))
-    return norm(sub(b, a))
+    d = sub(add(vec(pos, c), qrotate(quat_at(quat, c), vec(anc_c, j))), a)
+    return dot(d, d)
 
 
 @njit(cache=True, error_model="numpy")
-def _awake_gap(m, pos, quat, asleep):
-    """Largest anchor distance (m) of the joints of awake bodies (0 when none)."""
+def _awake_gap2(joints, pos, quat, asleep):
+    """The square of the largest anchor distance (m²) of the joints of awake bodies (0
+    when none); joints as ``_gap2``'s."""
     worst = 0.0
-    for j in range(len(m[0])):
-        if not asleep[m[1][j]]:
-            worst = max(worst, _gap(m, pos, quat, j))
+    for j in range(len(joints[0])):
+        if not asleep[joints[1][j]]:
+            worst = max(worst, _gap2(joints, pos, quat, j))
     return worst
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def state_ok(m, opt, pos, quat, lin, ang):
-    """False when the monitor (solver.monitor.check_state) would raise."""
-    worst = 0.0
+def state_ok(joints, opt, pos, quat, lin, ang):
+    """False when the monitor (solver.monitor.check_state) would raise; joints as
+    ``_gap2``'s.  Branch-free over the bodies: 0·x is 0 for every finite x and NaN
+    otherwise, so one sum tests them all; speeds, spins and anchor gaps are compared
+    squared."""
+    poison, fast = 0.0, False
+    max_speed2, max_spin2 = opt[8] * opt[8], opt[9] * opt[9]
     for b in range(len(pos)):
         for k in range(3):
-            if not (np.isfinite(pos[b, k]) and np.isfinite(lin[b, k]) and np.isfinite(ang[b, k])):
-                return False
+            poison += 0.0 * pos[b, k] + 0.0 * lin[b, k] + 0.0 * ang[b, k]
         for k in range(4):
-            if not np.isfinite(quat[b, k]):
-                return False
-        speed = norm((lin[b, 0], lin[b, 1], lin[b, 2]))
-        spin = norm((ang[b, 0], ang[b, 1], ang[b, 2]))
-        worst = max(worst, speed / opt[8], spin / opt[9])
-    if worst > 1.0:
+            poison += 0.0 * quat[b, k]
+        speed2 = lin[b, 0] * lin[b, 0] + lin[b, 1] * lin[b, 1] + lin[b, 2] * lin[b, 2]
+        spin2 = ang[b, 0] * ang[b, 0] + ang[b, 1] * ang[b, 1] + ang[b, 2] * ang[b, 2]
+        fast = fast or speed2 > max_speed2 or spin2 > max_spin2
+    if poison != 0.0 or fast:  # (NaN != 0)
         return False
-    return len(m[0]) == 0 or joint_gaps(m, pos, quat)[0] <= opt[10]
+    limit2 = opt[10] * opt[10]
+    within = True
+    for j in range(len(joints[0])):
+        within = within and _gap2(joints, pos, quat, j) <= limit2
+    return within
 
 
 @njit(cache=True, error_model="numpy")
@@ -221,7 +218,8 @@ def project(m, tree, pws, pos, quat, asleep):
     order, parent, no_rheo, rows, size, tw = tree
     prw, pa, pb, rot, inv_i, inertia_w, mu = pws
     nb, nj = len(pos), len(m[0])
-    if nj == 0 or _awake_gap(m, pos, quat, asleep) <= PROJECT_TOL:
+    joints = (m[0], m[1], m[2], m[3])
+    if nj == 0 or _awake_gap2(joints, pos, quat, asleep) <= PROJECT_TOL * PROJECT_TOL:
         return True  # (most steps: nothing to pull together)
     zeros = np.zeros((nb, 6))
     seq, nseq, bone = np.empty(len(order), np.int64), 0, m[1]
@@ -229,13 +227,13 @@ def project(m, tree, pws, pos, quat, asleep):
         if not (asleep[i] if i < nb else asleep[bone[i - nb]]):
             seq[nseq], nseq = i, nseq + 1
     for k in range(PROJECT_ROUNDS):
-        if k > 0 and _awake_gap(m, pos, quat, asleep) <= PROJECT_TOL:
+        if k > 0 and _awake_gap2(joints, pos, quat, asleep) <= PROJECT_TOL * PROJECT_TOL:
             break
         for b in range(nb):
             qmatrix(quat_at(quat, b), rot, b)
             congruence(rot, b, m[18], b, inv_i, b)
             congruence(rot, b, m[17], b, inertia_w, b)
-        n = anchor_rows(m, pos, rot, pos, 1.0, 1.0, False, asleep, prw, 0)
+        n = anchor_rows(joints, pos, rot, pos, 1.0, 1.0, False, asleep, prw, 0)
         response(prw, 0, n, m[16], inv_i, 1.0, pa, pb)
         prw[6][:n] = PROJECT_RIDGE
         for i in order:
@@ -256,13 +254,16 @@ def project(m, tree, pws, pos, quat, asleep):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def rheology_update(m, opt, st, rw, n, lam, vel, rheo_joint, quat, asleep, out):
+def rheology_update(rheo, opt, prev, rw, n, lam, vel, rheo_joint, quat, asleep, out):
     """q_sf, yield flags, anchors, torque filter and torques after the solve; the joints
-    of sleeping bodies (asleep) keep their state (their torque reads 0: no rows)."""
-    kf, df, dd, has, yield_, plastic, finite_yield = m[4], m[5], m[6], m[7], m[12], m[13], m[14]
-    q_sf0, yielded0, anchor0, avg0 = st[4], st[5], st[6], st[7]
+    of sleeping bodies (asleep) keep their state (their torque reads 0: no rows).
+    rheo: the model's joint parents, bones, K_f, D_f, D_d, has rheology, yield torque,
+    plastic, finite yield (m[0], m[1], m[4]–m[7], m[12]–m[14]); prev: the state's q_sf,
+    yield flags, anchors, torque filter (st[4:8])."""
+    parent, bone, kf, df, dd, has, yield_, plastic, finite_yield = rheo
+    q_sf0, yielded0, anchor0, avg0 = prev
     q_sf, yielded, anchor, avg, torque = out
-    h, parent, bone = opt[0], m[0], m[1]
+    h = opt[0]
     nj, body_a, body_b, jac_a, jac_b, kind = len(parent), rw[0], rw[1], rw[2], rw[3], rw[11]
     torque[:, :] = 0.0
     w = np.zeros((nj, 3))

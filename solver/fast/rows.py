@@ -109,13 +109,13 @@ def is_null(rw, i):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def anchor_rows(m, pos, rot, omega, h, erp, arc, asleep, rw, n):
+def anchor_rows(joints, pos, rot, omega, h, erp, arc, asleep, rw, n):
     """Three hard rows per joint (anchors pushed at their midpoint), bias (erp·C + N_c − N_p)/h.
 
     rot (nb,3,3) body rotations; omega (nb,3) the angular velocities of the arc terms
     (the last step's solved ones, as solver.step); arc=False drops the arc terms (the
     projection's rows); asleep (nb,) bool: joints of sleeping bodies get empty rows."""
-    parent, bone, anc_p, anc_c = m[0], m[1], m[2], m[3]
+    parent, bone, anc_p, anc_c = joints  # m[0], m[1], m[2], m[3]
     for j in range(len(parent)):
         p, c = parent[j], bone[j]
         if asleep[c]:
@@ -152,22 +152,23 @@ def q_rel(j, parent, bone, quat):
     return qmul(qconj(qp), quat_at(quat, bone[j]))
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def flowing(plastic, finite_yield, yielded, j):
     """Joint j uses the three-element row: finite D_d and yielded (or no yield torque).
 
     (Helpers called per joint or per row take single arrays, never the packed tuples:
-    passing a tuple of many arrays to a call costs far more than the call's work.)"""
+    passing a tuple of many arrays to a call costs far more than the call's work.  This
+    one is inlined: called, each of its three arrays costs two atomic reference counts,
+    ~14 ns each, three times per joint.)"""
     return plastic[j] and (yielded[j] or not finite_yield[j])
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def rheology_rows(m, quat, rot, h, q_sf, yielded, anchor, asleep, rheo_joint, rw, n):
+def rheology_rows(rheo, quat, rot, h, q_sf, yielded, anchor, asleep, rheo_joint, rw, n):
     """Three compliant rows per joint with rheology, on the parent's axes a_k = R_p e_k:
     Voigt C = 1/(D_f + K_f h), bias K_f δ/(D_f + K_f h), δ = log(q_rel ⊗ anchor⁻¹);
     three-element C = (D_d + D_f + K_f h)/(D_d (K_f h + D_f)), bias K_f q_sf/(K_f h + D_f)."""
-    parent, bone, kf, df, dd, has = m[0], m[1], m[4], m[5], m[6], m[7]
-    plastic, finite_yield = m[13], m[14]
+    parent, bone, kf, df, dd, has, _, plastic, finite_yield = rheo  # post.rheology_update's
     for j in range(len(parent)):
         if not has[j]:
             continue

@@ -71,15 +71,16 @@ def chol6() -> str:
 def eliminate6(split: bool = False) -> str:
     """tree._eliminate for m = mp = 6: Y = L⁻¹ G, D_p −= sign·YᵀY (lower triangle).
 
-    split: for a G whose upper-right 3×3 block is exactly zero (a body's block against
-    its joint's rows: the rheology rows have no linear part), ``eliminate6_split``: that
-    block of Y is zero, and the terms with its entries, each exactly ±0, are left out of
-    Y's lower right block and of YᵀY.  Adding ±0 to a sum changes nothing but a zero's
-    sign, so the results are the loop's (the zeros' signs aside)."""
-    half = N // 2 if split else 0  # columns from `half` on have Y's first `half` rows zero
+    split: for a G whose upper-left 3×3 block is exactly zero (a body against its
+    joint's rows and a joint's rows against a body: a joint node lists its rheology rows
+    first, and they have no linear part), ``eliminate6_split``: that block of Y is zero,
+    and the terms with its entries, each exactly ±0, are left out of Y's lower left block
+    and of YᵀY.  Adding ±0 to a sum changes nothing but a zero's sign, so the results are
+    the loop's (the zeros' signs aside)."""
+    half = N // 2 if split else 0  # columns before `half` have Y's first `half` rows zero
     body = [f"l{r}{c} = dm[i, {r}, {c}]" for r in range(N) for c in range(r + 1)]
     for c in range(N):
-        first = half if c >= half else 0
+        first = half if c < half else 0
         for r in range(N):
             if r < first:
                 body.append(f"y[i, {r}, {c}] = 0.0")
@@ -87,12 +88,12 @@ def eliminate6(split: bool = False) -> str:
             body += _fold(f"g[{r}, {c}]", "-", [f"l{r}{k} * y{k}{c}" for k in range(first, r)])
             body += [f"y{r}{c} = s * l{r}{r}", f"y[i, {r}, {c}] = y{r}{c}"]
     for a in range(N):
-        first = half if a >= half else 0
         for b in range(a + 1):
+            first = half if b < half else 0  # (b ≤ a: y[k, b] = 0 for k < half)
             body += _fold("0.0", "+", [f"y{k}{a} * y{k}{b}" for k in range(first, N)])
             body.append(f"dm[p, {a}, {b}] -= sign * s")
     name = "eliminate6_split" if split else "eliminate6"
-    corner = ", G[:3, 3:] = 0 (unroll)" if split else ""
+    corner = ", G[:3, :3] = 0 (unroll)" if split else ""
     doc = f"tree._eliminate of a 6×6 node into a 6×6 parent{corner}."
     return _function(f"{name}(i, p, sign, dm, y, g)", doc, body)
 

@@ -259,15 +259,14 @@ def test_tree_and_dense_solves_equal_scipy_on_a_joint_table(root_mode):
 
 
 def test_qexp_series_equals_the_exact_exponential():
-    """kin.qexp's Taylor branch (θ/2 < 10⁻³) and its sin/cos branch against numpy's
+    """kin.qexp's Taylor branch (θ/2 < EXP_SERIES) and its sin/cos branch against numpy's
     quat.exp (sin and cos for every angle), across and at the switch."""
-    from solver.fast.kin import qexp
+    from solver.fast.kin import EXP_SERIES, qexp
 
     rng = np.random.default_rng(5)
     axes = _unit_rows(rng, 3000)
-    angles = np.concatenate(
-        (10.0 ** rng.uniform(-12, 0, 2000), 2e-3 * (1 + rng.uniform(-1e-6, 1e-6, 1000)))
-    )
+    at_switch = 2.0 * EXP_SERIES * (1 + rng.uniform(-1e-6, 1e-6, 1000))
+    angles = np.concatenate((10.0 ** rng.uniform(-12, 0.4, 2000), at_switch))
     rotvecs = axes * angles[:, None]
     got = np.array([qexp(_tup(v)) for v in rotvecs])
     want = quat.exp(rotvecs)

@@ -68,22 +68,22 @@ def test_eliminate6_is_the_loop_elimination_bitwise(sign):
 
 @pytest.mark.parametrize("sign", [1.0, -1.0])
 def test_the_split_elimination_is_the_loop_elimination_where_it_applies(sign):
-    # A G with a zero upper-right 3×3 block (both zeros' signs, as −J makes them): the
+    # A G with a zero upper-left 3×3 block (both zeros' signs, as −J makes them): the
     # split kernel equals the loop everywhere (== counts −0 and 0 as equal), and the
     # factorisation picks it exactly for such blocks.
     rng = np.random.default_rng(4)
     for k in range(50):
         dm, _ = _factored(rng, sign)
         g = rng.normal(size=(6, 6))
-        g[:3, 3:] = 0.0 if k % 2 else -0.0
-        assert tree._upper_right_zero(g)
+        g[:3, :3] = 0.0 if k % 2 else -0.0
+        assert tree._upper_left_zero(g)
         y = np.zeros((NODES, 6, 6))
         dm2, y2 = dm.copy(), y.copy()
         tree6.eliminate6_split(0, 1, sign, dm, y, g)
         tree._eliminate(0, 1, 6, 6, sign, dm2, y2, g)
         assert np.array_equal(dm, dm2) and np.array_equal(y, y2)
-        g[rng.integers(3), rng.integers(3, 6)] = 1e-300
-        assert not tree._upper_right_zero(g)
+        g[rng.integers(3), rng.integers(3)] = 1e-300
+        assert not tree._upper_left_zero(g)
 
 
 def _same_in_place(x: np.ndarray, written, written_args: tuple, loops, loop_args: tuple) -> bool:
