@@ -16,8 +16,9 @@ test_tree6.py checks both, and that tree6.py is what ``source()`` makes).
 (The text is made before the file is replaced: a shell redirect would empty the file
 that importing solver.fast needs first.)
 
-Names: a{r}{c} the block read, l{r}{c} its factor (l{j}{j} the reciprocal of the
-diagonal, as tree._chol_block), y{r}{c} Y = L⁻¹ G, x{k} a right-hand side.
+Names: a{r}{c} the block read, l{r}{c} its factor (unit lower; l{j}{j} holds 1/Δ_jj,
+as tree._chol_block), d{j} = Δ_jj, w{j}{k} = l{j}{k}·d{k}, y{r}{c} Y = L⁻¹ G,
+z{k}{c} = y{k}{c}·l{k}{k}, x{k} a right-hand side, u{k} = x{k}·l{k}{k}.
 """
 
 from __future__ import annotations
@@ -32,8 +33,6 @@ The 6×6 block kernels of ``solver.fast.tree``, operation by operation; bitwise 
 its loops for 6×6 blocks."""
 
 from __future__ import annotations
-
-import math
 
 from numba import njit
 '''
@@ -57,19 +56,21 @@ def chol6() -> str:
     """tree._chol_block for m = 6: dm[i] ← its lower factor of sign·dm[i]."""
     body = [f"a{r}{c} = dm[i, {r}, {c}]" for r in range(N) for c in range(r + 1)]
     for j in range(N):
-        body += _fold(f"sign * a{j}{j}", "-", [f"l{j}{k} * l{j}{k}" for k in range(j)])
-        body += ["if not s > 0.0:", "    return False", f"l{j}{j} = 1.0 / math.sqrt(s)"]
+        body += [f"w{j}{k} = l{j}{k} * d{k}" for k in range(j)]
+        body += _fold(f"sign * a{j}{j}", "-", [f"l{j}{k} * w{j}{k}" for k in range(j)])
+        body += ["if not s > 0.0:", "    return False", f"l{j}{j} = 1.0 / s"]
+        body += [f"d{j} = s"] if j < N - 1 else []  # (the last column's is not read)
         body.append(f"dm[i, {j}, {j}] = l{j}{j}")
         for r in range(j + 1, N):
-            body += _fold(f"sign * a{r}{j}", "-", [f"l{r}{k} * l{j}{k}" for k in range(j)])
+            body += _fold(f"sign * a{r}{j}", "-", [f"l{r}{k} * w{j}{k}" for k in range(j)])
             body += [f"l{r}{j} = s * l{j}{j}", f"dm[i, {r}, {j}] = l{r}{j}"]
     body.append("return True")
-    doc = "tree._chol_block of a 6×6 block (reciprocal diagonal); False if not definite."
+    doc = "tree._chol_block of a 6×6 block (L Δ Lᵀ); False if not definite."
     return _function("chol6(dm, i, sign)", doc, body)
 
 
 def eliminate6(split: bool = False) -> str:
-    """tree._eliminate for m = mp = 6: Y = L⁻¹ G, D_p −= sign·YᵀY (lower triangle).
+    """tree._eliminate for m = mp = 6: Y = L⁻¹ G, D_p −= sign·Yᵀ Δ⁻¹ Y (lower triangle).
 
     split: for a G whose upper-left 3×3 block is exactly zero (a body against its
     joint's rows and a joint's rows against a body: a joint node lists its rheology rows
@@ -86,11 +87,14 @@ def eliminate6(split: bool = False) -> str:
                 body.append(f"y[i, {r}, {c}] = 0.0")
                 continue
             body += _fold(f"g[{r}, {c}]", "-", [f"l{r}{k} * y{k}{c}" for k in range(first, r)])
-            body += [f"y{r}{c} = s * l{r}{r}", f"y[i, {r}, {c}] = y{r}{c}"]
+            body += [f"y{r}{c} = s", f"y[i, {r}, {c}] = y{r}{c}"]
+    for k in range(N):
+        for c in range(half if k < half else 0, N):
+            body.append(f"z{k}{c} = y{k}{c} * l{k}{k}")
     for a in range(N):
         for b in range(a + 1):
             first = half if b < half else 0  # (b ≤ a: y[k, b] = 0 for k < half)
-            body += _fold("0.0", "+", [f"y{k}{a} * y{k}{b}" for k in range(first, N)])
+            body += _fold("0.0", "+", [f"y{k}{a} * z{k}{b}" for k in range(first, N)])
             body.append(f"dm[p, {a}, {b}] -= sign * s")
     name = "eliminate6_split" if split else "eliminate6"
     corner = ", G[:3, :3] = 0 (unroll)" if split else ""
@@ -99,30 +103,31 @@ def eliminate6(split: bool = False) -> str:
 
 
 def forward6() -> str:
-    """tree._forward_block for m = 6: x[i] ← L⁻¹ x[i]."""
+    """tree._forward_block for m = 6: x[i] ← L⁻¹ x[i] (unit lower)."""
     body = []
     for r in range(N):
         body += _fold(f"x[i, {r}]", "-", [f"dm[i, {r}, {k}] * x{k}" for k in range(r)])
-        body += [f"x{r} = s * dm[i, {r}, {r}]", f"x[i, {r}] = x{r}"]
+        body += [f"x{r} = s", f"x[i, {r}] = x{r}"]
     return _function("forward6(dm, i, x)", "tree._forward_block of a 6×6 block.", body)
 
 
 def backward6() -> str:
-    """tree._backward_block for m = 6: x[i] ← L⁻ᵀ x[i]."""
+    """tree._backward_block for m = 6: x[i] ← L⁻ᵀ Δ⁻¹ x[i]."""
     body = []
     for r in range(N - 1, -1, -1):
-        body += _fold(f"x[i, {r}]", "-", [f"dm[i, {k}, {r}] * x{k}" for k in range(r + 1, N)])
-        body += [f"x{r} = s * dm[i, {r}, {r}]", f"x[i, {r}] = x{r}"]
+        terms = [f"dm[i, {k}, {r}] * x{k}" for k in range(r + 1, N)]
+        body += _fold(f"x[i, {r}] * dm[i, {r}, {r}]", "-", terms)
+        body += [f"x{r} = s", f"x[i, {r}] = x{r}"]
     return _function("backward6(dm, i, x)", "tree._backward_block of a 6×6 block.", body)
 
 
 def fold_up6() -> str:
-    """tree._fold_up for m = mp = 6: x_p −= sign·Y_iᵀ x_i."""
-    body = [f"x{k} = x[i, {k}]" for k in range(N)]
+    """tree._fold_up for m = mp = 6: x_p −= sign·Y_iᵀ Δ_i⁻¹ x_i."""
+    body = [f"u{k} = x[i, {k}] * dm[i, {k}, {k}]" for k in range(N)]
     for a in range(N):
-        body += _fold("0.0", "+", [f"y[i, {k}, {a}] * x{k}" for k in range(N)])
+        body += _fold("0.0", "+", [f"y[i, {k}, {a}] * u{k}" for k in range(N)])
         body.append(f"x[p, {a}] -= sign * s")
-    return _function("fold_up6(i, p, sign, y, x)", "tree._fold_up of 6×6 blocks.", body)
+    return _function("fold_up6(i, p, sign, dm, y, x)", "tree._fold_up of 6×6 blocks.", body)
 
 
 def take_down6() -> str:
