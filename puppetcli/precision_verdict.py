@@ -11,8 +11,9 @@ or lower run time"), so between settings of equal cost the verdict can go either
 with the machine's timing noise; the line prints the time ratio so a reader can tell.
 Only measured points are compared: no curve is interpolated or extrapolated, so a
 claim never rests on a point nobody ran.  To compare at equal run time the study runs
-the faster settings again at the finer step that spends the baseline's time
-(``precision.equal_time_rows``); those are measured points like the others.  The
+the faster settings again at the finest step planned to spend at most 90 % of the
+baseline's time (``precision.equal_time_rows``, EQUAL_TIME_BUDGET); those are measured
+points like the others.  The
 winner of a scene is the setting that beats the most baseline points, ties broken by
 the larger geometric-mean error ratio e_b / e over the points it beats.
 

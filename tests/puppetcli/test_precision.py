@@ -241,26 +241,29 @@ def test_cli_precision_quick_with_peers_missing(tmp_path, monkeypatch):
 
 
 def test_equal_time_step_spends_the_baselines_time_on_the_sample_grid():
-    # Run time ∝ 1/h over a fixed span: a setting twice as fast at 20 ms can afford
-    # 10 ms; 0.72× as fast at 1 ms, 0.5/696 s (the grid step just below 0.719 ms).
-    assert precision.equal_time_h(0.02, 1.0, 0.5) == pytest.approx(0.01, rel=1e-12)
+    # Run time ∝ 1/h over a fixed span, planned at 90 % of the baseline's: a setting
+    # taking 0.45 of its time at 20 ms can afford 10 ms; 0.72× at 1 ms, 0.5/625 s (the
+    # finest grid step whose predicted time, 0.2189 s, is within 0.9 × 0.2435 s).
+    assert precision.EQUAL_TIME_BUDGET == 0.9
+    assert precision.equal_time_h(0.02, 1.0, 0.45) == pytest.approx(0.01, rel=1e-12)
     h = precision.equal_time_h(0.001, 0.2435, 0.1751)
-    assert h == pytest.approx(0.5 / 696, rel=1e-12) and h <= 0.001 * 0.1751 / 0.2435
-    assert precision.equal_time_h(0.005, 1.0, 1.0) is None  # not faster: nothing to run
+    assert h == pytest.approx(0.5 / 625, rel=1e-12)
+    assert 0.1751 * 0.001 / h <= 0.9 * 0.2435 < 0.1751 * 0.001 / (0.5 / 626)
+    assert precision.equal_time_h(0.005, 1.0, 0.95) is None  # not fast enough: no run
     assert precision.equal_time_h(0.005, 1.0, 1.3) is None
     for times in (scenes.DOLL_TIMES, scenes.CHAIN_TIMES, (scenes.T_LOAD, scenes.T_END)):
         scenes.key_steps(h, times)  # every sample time stays a step boundary
 
 
 def test_equal_time_runs_are_measured_at_the_finer_step():
-    # A baseline point at 20 ms that took twice auto's time: auto runs again at 10 ms
+    # A baseline point at 20 ms that took 1/0.45 of auto's time: auto runs again at 10 ms
     # (a real run, noted), and creep's first-order error there is about half of 20 ms's.
     auto = Setting("auto", "auto")
 
     def row(setting, seconds, h=0.02):
         return PrecisionRow("creep", setting, h, 300, seconds, math.nan, math.nan, 3.97e-4, "rad")
 
-    got = precision.equal_time_rows([row(BASELINE, 1.0), row("auto", 0.5)], [auto], 1, {})
+    got = precision.equal_time_rows([row(BASELINE, 1.0), row("auto", 0.45)], [auto], 1, {})
     (r,) = got
     assert (r.scene, r.setting, r.note) == ("creep", "auto", precision.EQUAL_TIME_NOTE)
     assert r.h == pytest.approx(0.01) and r.steps == 600
