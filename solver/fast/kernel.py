@@ -39,14 +39,24 @@ from solver.fast.kin import congruence, matvec, qmatrix, quat_at
 from solver.fast.post import (
     apply,
     apply_rows,
+    gaps_within,
     integrate,
+    needs_projection,
     project,
     response,
     rheology_update,
     row_response,
     state_ok,
 )
-from solver.fast.rows import ZERO, anchor_rows, flowing, is_null, limit_rows, rheology_rows
+from solver.fast.rows import (
+    ZERO,
+    anchor_rows,
+    flowing,
+    is_null,
+    limit_arrays,
+    limit_rows,
+    rheology_rows,
+)
 from solver.fast.tree import forest_sequence, row_velocity, tree_solve
 from solver.pgs import pgs_solve
 from solver.rows import KIND_GRIP, KIND_RHEOLOGY
@@ -100,7 +110,7 @@ def free_velocity(inv_mass, opt, vel, omega, inv_i, loads, out):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def build_rows(m, joints, rheo, g, opt, iopt, st, rot, vel_free, inp, ws, asleep, awake):
+def build_rows(joints, rheo, limits, g, opt, iopt, st, rot, vel_free, inp, ws, asleep, awake):
     """Fill the row table; returns (rows, scene contacts, first grip row, grip rows), or
     rows = −1 when a box–box pair is within reach.  The shapes' world frames (ws[8],
     ws[9]) are already computed; asleep/awake (nb,) bool: sleeping bodies and the awake
@@ -115,7 +125,7 @@ def build_rows(m, joints, rheo, g, opt, iopt, st, rot, vel_free, inp, ws, asleep
     if iopt[3]:
         n = rheology_rows(rheo, quat, rot, h, st[4], st[5], st[6], asleep, rheo_joint, rw, n)
     if iopt[4]:
-        n = limit_rows(m, quat, rot, h, opt[1], opt[5], asleep, rw, n)
+        n = limit_rows(limits, quat, rot, h, opt[1], opt[5], asleep, rw, n)
     tick(prof, on, 2, t)
     ncontact = 0
     if iopt[5]:
@@ -371,7 +381,7 @@ def step_kernel(flat, st, inp, out, rep_i, rep_f):
     t = tick(prof, on, 1, t)
     joint_part = prof[2]
     n, ncontact, grip0, ngrip = build_rows(
-        m, joints, rheo, g, opt, iopt, st, rot, vel_free, inp, ws, asleep, awake
+        joints, rheo, limit_arrays(m), g, opt, iopt, st, rot, vel_free, inp, ws, asleep, awake
     )
     if n < 0:
         return _handed_back(FALLBACK, out, rep_i, rep_f)
@@ -384,12 +394,14 @@ def step_kernel(flat, st, inp, out, rep_i, rep_f):
         bw, tree, rw, opt, iopt, (st[8], st[9]), n, vel_free, grip, asleep
     )
     t = tick(prof, on, 5, t)
-    if status or not state_ok(joints, opt, pos, quat, vel[:, :3], vel[:, 3:]):
+    if status or not state_ok(joints, opt, pos, quat, vel[:, :3], vel[:, 3:], False):
         return _handed_back(FALLBACK, out, rep_i, rep_f)
     integrate(m[17], m[18], opt[0], pos, quat, vel, rot, asleep, out[0], out[1], out[3])
-    if not project(m, ptree, pws, out[0], out[1], asleep):
+    projected = needs_projection(joints, out[0], out[1], asleep)
+    if projected and not project(m, ptree, pws, out[0], out[1], asleep):
         return _handed_back(FALLBACK, out, rep_i, rep_f)
-    if not state_ok(joints, opt, out[0], out[1], vel[:, :3], out[3]):
+    gaps_known = gaps_within(projected, opt)
+    if not state_ok(joints, opt, out[0], out[1], vel[:, :3], out[3], gaps_known):
         return _handed_back(FALLBACK, out, rep_i, rep_f)
     out[2][:, :] = vel[:, :3]
     t = tick(prof, on, 6, t)

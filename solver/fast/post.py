@@ -126,11 +126,21 @@ def _awake_gap2(joints, pos, quat, asleep):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def state_ok(joints, opt, pos, quat, lin, ang):
+def gaps_within(projected, opt):
+    """After integration and ``project``: every anchor gap is known to be within the
+    monitor's limit without measuring it, when nothing needed projecting (every awake
+    joint within PROJECT_TOL, and PROJECT_TOL within the limit) — the sleeping joints
+    have not moved since the step's first check (``state_ok`` on its start pose)."""
+    return not projected and opt[10] >= PROJECT_TOL
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def state_ok(joints, opt, pos, quat, lin, ang, gaps_known):
     """False when the monitor (solver.monitor.check_state) would raise; joints as
     ``_gap2``'s.  Branch-free over the bodies: 0·x is 0 for every finite x and NaN
     otherwise, so one sum tests them all; speeds, spins and anchor gaps are compared
-    squared."""
+    squared.  gaps_known: every anchor gap is already known to be within the limit
+    (the caller's ``gaps_within``), so they are not measured again."""
     poison, fast = 0.0, False
     max_speed2, max_spin2 = opt[8] * opt[8], opt[9] * opt[9]
     for b in range(len(pos)):
@@ -143,6 +153,8 @@ def state_ok(joints, opt, pos, quat, lin, ang):
         fast = fast or speed2 > max_speed2 or spin2 > max_spin2
     if poison != 0.0 or fast:  # (NaN != 0)
         return False
+    if gaps_known:
+        return True
     limit2 = opt[10] * opt[10]
     within = True
     for j in range(len(joints[0])):
@@ -210,24 +222,30 @@ def _apply_side(body, n, resp, lam, vel):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
+def needs_projection(joints, pos, quat, asleep):
+    """Some awake joint's anchors are more than PROJECT_TOL apart (``project``'s work;
+    most steps: none).  joints as ``_gap2``'s."""
+    return len(joints[0]) > 0 and _awake_gap2(joints, pos, quat, asleep) > PROJECT_TOL * PROJECT_TOL
+
+
+@njit(cache=True, error_model="numpy", inline="always")
 def project(m, tree, pws, pos, quat, asleep):
-    """Pull joint anchors together in place (solver.stabilize.project_joints); False if the
-    projection system is degenerate.  tree = (order, parent, no_rheo, rows, size, tw);
-    pws = (rows, resp_a, resp_b, rot, inv_i, inertia_w, μ) scratch.  The joints of
-    sleeping bodies (asleep) are left as they are."""
+    """Pull joint anchors together in place (solver.stabilize.project_joints) when
+    ``needs_projection`` (the caller asks first); False if the projection system is
+    degenerate.  tree = (order, parent, no_rheo, rows, size, tw); pws = (rows, resp_a,
+    resp_b, rot, inv_i, inertia_w, μ) scratch.  The joints of sleeping bodies (asleep)
+    are left as they are."""
     order, parent, no_rheo, rows, size, tw = tree
     prw, pa, pb, rot, inv_i, inertia_w, mu = pws
-    nb, nj = len(pos), len(m[0])
+    nb = len(pos)
     joints = (m[0], m[1], m[2], m[3])
-    if nj == 0 or _awake_gap2(joints, pos, quat, asleep) <= PROJECT_TOL * PROJECT_TOL:
-        return True  # (most steps: nothing to pull together)
     zeros = np.zeros((nb, 6))
     seq, nseq, bone = np.empty(len(order), np.int64), 0, m[1]
     for i in order:
         if not (asleep[i] if i < nb else asleep[bone[i - nb]]):
             seq[nseq], nseq = i, nseq + 1
     for k in range(PROJECT_ROUNDS):
-        if k > 0 and _awake_gap2(joints, pos, quat, asleep) <= PROJECT_TOL * PROJECT_TOL:
+        if k > 0 and not needs_projection(joints, pos, quat, asleep):
             break
         for b in range(nb):
             qmatrix(quat_at(quat, b), rot, b)

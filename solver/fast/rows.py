@@ -218,15 +218,22 @@ def _wrap(x):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def limit_rows(m, quat, rot, h, erp, margin, asleep, rw, n):
+def limit_arrays(m):
+    """What ``limit_rows`` reads of the model: joint parents, bones, rest axes, swing and
+    twist limits, thresholds (m[0], m[1], m[8]–m[11], m[21])."""
+    return (m[0], m[1], m[8], m[9], m[10], m[11], m[21])
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def limit_rows(limits, quat, rot, h, erp, margin, asleep, rw, n):
     """One-sided rows (λ ≥ 0) for limits within ``margin``: swing rows of every joint,
     then twist-low, then twist-high; bias C/h when C ≥ 0 (speculative) else erp·C/h.
     swing θ = acos(d·d'), C = swing − θ, axis −R_p (d × d')/|d × d'|;
     twist φ = 2 atan2(q.xyz·d, q.w) wrapped to [−π, π), C = φ − lo or hi − φ, axis ±R_p d'.
     Joints of sleeping bodies (asleep) have none.  Each joint's C and d' are computed
     once (``limit_gaps``), the rows then made in their order."""
-    parent, bone, axis_rest = m[0], m[1], m[8]
-    gaps, turned = limit_gaps(m, quat, asleep)
+    parent, bone, axis_rest = limits[0], limits[1], limits[2]
+    gaps, turned = limit_gaps(limits, quat, asleep)
     for slot in range(3):
         for j in range(len(parent)):
             c = gaps[j, slot]
@@ -252,15 +259,14 @@ def limit_rows(m, quat, rot, h, erp, margin, asleep, rw, n):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def limit_gaps(m, quat, asleep):
+def limit_gaps(limits, quat, asleep):
     """((nj, 3) C of the swing, twist-low and twist-high limits, (nj, 3) d' = q_rel d)
     of every awake joint (``limit_rows``).  A C that cannot be below the margin is +∞,
-    its angle not computed: a joint well inside its limits by the thresholds m[21]
+    its angle not computed: a joint well inside its limits by the thresholds
     (``limit_thresholds``: an infinite limit is never reached), which compare d·d' and
     the twist's tangent without acos or atan2 and keep a 10⁻⁹ rad margin over the
     rounding of either, so the rows made are exactly those the angles give."""
-    parent, bone, axis_rest, swing, tw_lo, tw_hi = m[0], m[1], m[8], m[9], m[10], m[11]
-    thresholds = m[21]
+    parent, bone, axis_rest, swing, tw_lo, tw_hi, thresholds = limits  # limit_arrays
     nj = len(parent)
     gaps, turned = np.empty((nj, 3)), np.empty((nj, 3))
     for j in range(nj):

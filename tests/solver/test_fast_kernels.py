@@ -16,7 +16,7 @@ from solver.fast.contacts import collide_pointer, collide_scene, world_shapes
 from solver.fast.flat import unflatten
 from solver.fast.narrow import segment_box, segment_segment
 from solver.fast.pack import fast_model, pack
-from solver.fast.rows import LIMIT_SLACK, limit_rows, row_arrays
+from solver.fast.rows import LIMIT_SLACK, limit_arrays, limit_rows, row_arrays
 from solver.fast.tree import dense_solve, node_rows, tree_solve
 from solver.joints import joint_frames
 from solver.joints import limit_rows as numpy_limit_rows
@@ -295,7 +295,8 @@ def test_qlog_series_equals_the_exact_logarithm():
 def _fast_limit_rows(flat, body_quat, body_rot):
     m, _, _, _, ws, _, opt, _ = unflatten(flat)
     asleep = np.zeros(len(body_quat), dtype=np.bool_)
-    return limit_rows(m, body_quat, body_rot, opt[0], opt[1], opt[5], asleep, ws[0], 0)
+    limits = limit_arrays(m)
+    return limit_rows(limits, body_quat, body_rot, opt[0], opt[1], opt[5], asleep, ws[0], 0)
 
 
 def _near(rng, edge: float, far: tuple[float, float]) -> float:
