@@ -144,9 +144,10 @@ def _omega(omega, b):
     return vec(omega, b) if b >= 0 else ZERO
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", inline="always")
 def q_rel(j, parent, bone, quat):
-    """q_p⁻¹ ⊗ q_c of joint j (the world's q_p is the identity)."""
+    """q_p⁻¹ ⊗ q_c of joint j (the world's q_p is the identity).  Inlined, as
+    ``flowing``: three arrays, three calls per joint a step."""
     p = parent[j]
     qp = quat_at(quat, p) if p >= 0 else (1.0, 0.0, 0.0, 0.0)
     return qmul(qconj(qp), quat_at(quat, bone[j]))
