@@ -193,6 +193,7 @@ def hybrid_solve(bw, tree, h, rw, n, ne, vel_free, lam0, iterations, grip, skip,
     h: the step; ``skip``: leave dormant rows out of the iteration; asleep (nb,) bool:
     sleeping bodies (their islands are not in the forest)."""
     grip0, ngrip, body = grip
+    resp_a, resp_b = bw[3], bw[4]
     dormant = dormant_rows(rw, n, lam0) if skip else np.zeros(n, dtype=np.bool_)
     at_lo, at_hi = np.zeros(n, dtype=np.bool_), np.zeros(n, dtype=np.bool_)
     its, free_grip = np.empty(n, np.int64), np.empty(6, np.int64)
@@ -211,7 +212,7 @@ def hybrid_solve(bw, tree, h, rw, n, ne, vel_free, lam0, iterations, grip, skip,
                 its[nu], nu = i, nu + 1
         vel_p = vel_free.copy()
         if pinned:  # (none in most rounds: nothing to add)
-            apply_rows(rw, at_lo | at_hi, bw[3], bw[4], lam, vel_p)
+            apply_rows(rw, at_lo | at_hi, resp_a, resp_b, lam, vel_p)
         ok, vel, sweeps, residual = _round(
             bw, tree, h, rw, n, lam, vel_p, its, nu, (free_grip, nfree, body), lam0,
             iterations, asleep,

@@ -207,9 +207,10 @@ def _tree_pass(bw, tree, h, rw, vel_free, free_grip, ngrip, body, asleep, lam):
     """λ of the joint rows and the free grip rows by the tree elimination (pinned rows'
     forces are already in vel_free); False when the system is degenerate."""
     _, parent, _, _, seq, rows, size, tw = tree
+    joint_bone, mass, movable, _, _, _, inertia_w = bw
     nb = len(vel_free)
-    nseq = forest_sequence(tree, nb, bw[2], free_grip, ngrip, body, asleep, bw[0])
-    return tree_solve(seq, nseq, parent, nb, rw, vel_free, h, bw[1], bw[6], rows, size, tw, lam)
+    nseq = forest_sequence(tree, nb, movable, free_grip, ngrip, body, asleep, joint_bone)
+    return tree_solve(seq, nseq, parent, nb, rw, vel_free, h, mass, inertia_w, rows, size, tw, lam)
 
 
 @njit(cache=True, error_model="numpy")
@@ -221,6 +222,7 @@ def direct(bw, tree, h, rw, n, vel_free, grip, asleep):
     free row whose force leaves its box is pinned; ≤ DIRECT_ROUNDS rounds.
     code 0: settled; 1: not settled (λ clipped, PGS finishes); 2: degenerate (fall back)."""
     grip0, ngrip, body = grip
+    resp_a, resp_b = bw[3], bw[4]
     lo, hi = rw[4], rw[5]
     at_lo, at_hi = np.zeros(n, dtype=np.bool_), np.zeros(n, dtype=np.bool_)
     free_grip = np.empty(6, dtype=np.int64)
@@ -234,11 +236,11 @@ def direct(bw, tree, h, rw, n, vel_free, grip, asleep):
             else:
                 free_grip[nfree], nfree = i, nfree + 1
         vel = vel_free.copy()
-        apply_rows(rw, at_lo | at_hi, bw[3], bw[4], lam, vel)
+        apply_rows(rw, at_lo | at_hi, resp_a, resp_b, lam, vel)
         if not _tree_pass(bw, tree, h, rw, vel, free_grip, nfree, body, asleep, lam):
             return 2, lam, vel, 0.0
         vel = vel_free.copy()
-        apply(rw, n, bw[3], bw[4], lam, vel)
+        apply(rw, n, resp_a, resp_b, lam, vel)
         changed, residual = False, 0.0
         for i in range(n):
             r[i] = row_velocity(rw, i, vel) + rw[6][i] * lam[i] + rw[7][i]
@@ -398,7 +400,7 @@ def step_kernel(flat, st, inp, out, rep_i, rep_f):
         return _handed_back(FALLBACK, out, rep_i, rep_f)
     integrate(m[17], m[18], opt[0], pos, quat, vel, rot, asleep, out[0], out[1], out[3])
     projected = needs_projection(joints, out[0], out[1], asleep)
-    if projected and not project(m, ptree, pws, out[0], out[1], asleep):
+    if projected and not project(m, joints, ptree, pws, out[0], out[1], asleep):
         return _handed_back(FALLBACK, out, rep_i, rep_f)
     gaps_known = gaps_within(projected, opt)
     if not state_ok(joints, opt, out[0], out[1], vel[:, :3], out[3], gaps_known):

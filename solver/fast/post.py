@@ -226,20 +226,19 @@ def _apply_side(body, n, resp, lam, vel):
 def needs_projection(joints, pos, quat, asleep):
     """Some awake joint's anchors are more than PROJECT_TOL apart (``project``'s work;
     most steps: none).  joints as ``_gap2``'s."""
-    return len(joints[0]) > 0 and _awake_gap2(joints, pos, quat, asleep) > PROJECT_TOL * PROJECT_TOL
+    return _awake_gap2(joints, pos, quat, asleep) > PROJECT_TOL * PROJECT_TOL
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def project(m, tree, pws, pos, quat, asleep):
+def project(m, joints, tree, pws, pos, quat, asleep):
     """Pull joint anchors together in place (solver.stabilize.project_joints) when
     ``needs_projection`` (the caller asks first); False if the projection system is
-    degenerate.  tree = (order, parent, no_rheo, rows, size, tw); pws = (rows, resp_a,
-    resp_b, rot, inv_i, inertia_w, μ) scratch.  The joints of sleeping bodies (asleep)
-    are left as they are."""
+    degenerate.  joints as ``_gap2``'s; tree = (order, parent, no_rheo, rows, size, tw);
+    pws = (rows, resp_a, resp_b, rot, inv_i, inertia_w, μ) scratch.  The joints of
+    sleeping bodies (asleep) are left as they are."""
     order, parent, no_rheo, rows, size, tw = tree
     prw, pa, pb, rot, inv_i, inertia_w, mu = pws
     nb = len(pos)
-    joints = (m[0], m[1], m[2], m[3])
     zeros = np.zeros((nb, 6))
     seq, nseq, bone = np.empty(len(order), np.int64), 0, m[1]
     for i in order:

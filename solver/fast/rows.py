@@ -159,8 +159,8 @@ def flowing(plastic, finite_yield, yielded, j):
 
     (Helpers called per joint or per row take single arrays, never the packed tuples:
     passing a tuple of many arrays to a call costs far more than the call's work.  This
-    one is inlined: called, each of its three arrays costs two atomic reference counts,
-    ~14 ns each, three times per joint.)"""
+    one is inlined: called, each of its three arrays cost two reference-count calls,
+    three times per joint a step.)"""
     return plastic[j] and (yielded[j] or not finite_yield[j])
 
 
