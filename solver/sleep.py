@@ -97,7 +97,7 @@ def _near(centre, bound, i, k, margin):
     return math.sqrt(d) - bound[i] - bound[k] <= margin
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=True)
 def touch(island, asleep, still, fresh, loaded, grip_body, pointer, centre, bound, shape_body,
           pair_a, pair_b, margin, vel, omega, speed, spin):  # fmt: skip
     """Wake every island touched this step (module docstring), restart its timer and mark
@@ -143,7 +143,7 @@ def touch(island, asleep, still, fresh, loaded, grip_body, pointer, centre, boun
     return woke
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=True)
 def settle(island, asleep, still, vel, omega, joint_bone, joint_flowing, h, speed, spin,
            sleep_time, fresh):  # fmt: skip
     """After a step: advance the rest timers of awake islands and put to sleep those at

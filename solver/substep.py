@@ -94,7 +94,7 @@ def _anchor_forces(nj, warm_key, warm_lam):
     return f
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=True)
 def substeps_needed(h, max_substeps, joint_parent, joint_bone, inv_mass, levers, warm_key,
                     warm_lam):  # fmt: skip
     """n ≥ 1 equal substeps for the step; 1 when max_substeps ≤ 1.  levers: the model's

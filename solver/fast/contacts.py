@@ -64,7 +64,7 @@ def world_shapes(g, body_pos, body_quat, centre, rot):
             qmatrix(quat_at(shape_quat, k), rot, k)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def collide_scene(g, centre, rot, margin, cb, cull, awake):
     """Contacts of the scene's candidate pairs into cb; returns the count, or −1 when a
     box–box pair is within reach (not compiled: the caller falls back to numpy).  With

@@ -128,14 +128,14 @@ def _row_pointer(typingctx, buf, row):
     return types.CPointer(buf.dtype)(buf, row), codegen
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)  # returns views: never without NRT (kernel._step)
 def leaf(buf, lay, k):
     """Leaf k (layout lay): its rows of buf, as an array that holds no reference to buf
     (module docstring)."""
     return carray(_row_pointer(buf, lay[k, 0]), (lay[k, 1],) + buf.shape[1:])
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)  # returns views: never without NRT (kernel._step)
 def _model(flat, k):
     """m (pack): joints' indices, anchors, gains, limits, yield; bodies' mass, inertia,
     island; joints' tension levers and limit thresholds."""
@@ -150,7 +150,7 @@ def _model(flat, k):
     )  # fmt: skip
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)  # returns views: never without NRT (kernel._step)
 def _geometry(flat, k):
     """g (pack): shapes, then candidate pairs, then the pointer-touchable shapes."""
     f, f3, f4, _, _, _, i, _, _, lay = flat
@@ -162,14 +162,14 @@ def _geometry(flat, k):
     )  # fmt: skip
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)  # returns views: never without NRT (kernel._step)
 def _tree_ws(flat, k):
     """The elimination's block workspace (D, Y, w, g)."""
     f6, f66, lay = flat[3], flat[5], flat[9]
     return leaf(f66, lay, k), leaf(f66, lay, k + 1), leaf(f6, lay, k + 2), leaf(f6, lay, k + 3)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)  # returns views: never without NRT (kernel._step)
 def _tree(flat, k):
     """tree (pack._forest): order, parents, rheology rows, sequence, node rows, workspace."""
     i, i6, lay = flat[6], flat[7], flat[9]
@@ -179,7 +179,7 @@ def _tree(flat, k):
     )  # fmt: skip
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)  # returns views: never without NRT (kernel._step)
 def _ptree(flat, k):
     """ptree (pack._forest): the projection's forest (tree's arrays, no rheology rows)."""
     i, i6, lay = flat[6], flat[7], flat[9]
@@ -189,7 +189,7 @@ def _ptree(flat, k):
     )  # fmt: skip
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)  # returns views: never without NRT (kernel._step)
 def _rows(flat, k):
     """A row table (pack._rows, solver.fast.rows.set_row), leaves k … k + 11."""
     f, f6, i, lay = flat[0], flat[3], flat[6], flat[9]
@@ -200,7 +200,7 @@ def _rows(flat, k):
     )  # fmt: skip
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)  # returns views: never without NRT (kernel._step)
 def _contacts(flat, k):
     """Contact buffers (pack._contacts): body_a, body_b, point, normal, depth, friction, key."""
     f, f3, i, lay = flat[0], flat[1], flat[6], flat[9]
@@ -210,7 +210,7 @@ def _contacts(flat, k):
     )  # fmt: skip
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)  # returns views: never without NRT (kernel._step)
 def _ws(flat, k):
     """ws (pack): rows, responses, rheology joints, contacts, frames, shapes, profile."""
     f3, f6, f33, i, lay = flat[1], flat[3], flat[4], flat[6], flat[9]
@@ -221,7 +221,7 @@ def _ws(flat, k):
     )  # fmt: skip
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)  # returns views: never without NRT (kernel._step)
 def _pws(flat, k):
     """pws (pack): the projection's rows, responses, frames and λ."""
     f, f6, f33, lay = flat[0], flat[3], flat[4], flat[9]
@@ -231,7 +231,13 @@ def _pws(flat, k):
     )  # fmt: skip
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=True)  # returns views: never without NRT (kernel._step)
+def row_capacity(flat):
+    """The row table's length (ws[0]: pack's worst case of rows a step can make)."""
+    return flat[9][_WS, 1]
+
+
+@njit(cache=True, _nrt=True)  # returns views: never without NRT (kernel._step)
 def unflatten(flat):
     """(m, g, tree, ptree, ws, pws, opt, iopt) as views of ``flat``'s buffers."""
     return (

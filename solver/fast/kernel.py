@@ -33,9 +33,9 @@ from solver.fast.contacts import (
     is_touch_row,
     world_shapes,
 )
-from solver.fast.flat import unflatten
+from solver.fast.flat import row_capacity, unflatten
 from solver.fast.hybrid import hybrid_solve
-from solver.fast.kin import congruence, matvec, qmatrix, quat_at
+from solver.fast.kin import frames, matvec
 from solver.fast.post import (
     apply,
     apply_rows,
@@ -93,7 +93,7 @@ def tick(prof, on, stage, t0):
     return t
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def free_velocity(inv_mass, opt, vel, omega, inv_i, loads, out):
     """(nb,6) velocities after gravity and external loads (force, torque, flags: the
     input's inp[0], inp[1], inp[4]), before constraints."""
@@ -110,11 +110,12 @@ def free_velocity(inv_mass, opt, vel, omega, inv_i, loads, out):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def build_rows(joints, rheo, limits, g, opt, iopt, st, rot, vel_free, inp, ws, asleep, awake):
+def build_rows(joints, rheo, limits, g, opt, iopt, st, rot, vel_free, inp, ws, asleep, awake,
+               limit_scratch):  # fmt: skip
     """Fill the row table; returns (rows, scene contacts, first grip row, grip rows), or
     rows = −1 when a box–box pair is within reach.  The shapes' world frames (ws[8],
     ws[9]) are already computed; asleep/awake (nb,) bool: sleeping bodies and the awake
-    movable ones (solver.sleep)."""
+    movable ones (solver.sleep); limit_scratch: ``limit_rows``' (gaps, turned)."""
     pos, quat = st[0], st[1]
     rw, rheo_joint, cb, centre, srot = ws[0], ws[3], ws[4], ws[8], ws[9]
     pvec, cvec, ivec = inp[2], inp[3], inp[4]
@@ -125,7 +126,8 @@ def build_rows(joints, rheo, limits, g, opt, iopt, st, rot, vel_free, inp, ws, a
     if iopt[3]:
         n = rheology_rows(rheo, quat, rot, h, st[4], st[5], st[6], asleep, rheo_joint, rw, n)
     if iopt[4]:
-        n = limit_rows(limits, quat, rot, h, opt[1], opt[5], asleep, rw, n)
+        gaps, turned = limit_scratch
+        n = limit_rows(limits, quat, rot, h, opt[1], opt[5], asleep, rw, n, gaps, turned)
     tick(prof, on, 2, t)
     ncontact = 0
     if iopt[5]:
@@ -162,7 +164,7 @@ def build_rows(joints, rheo, limits, g, opt, iopt, st, rot, vel_free, inp, ws, a
     return n, ncontact, n, 0
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def regularize(rw, n, inv_mass, inv_i, h, eps):
     """comp ← ε·A_ii on every row without compliance of its own, A_ii = J_i h M⁻¹ J_iᵀ
     from each side's ``row_response`` in registers (what ``response`` stores, which is
@@ -180,14 +182,19 @@ def regularize(rw, n, inv_mass, inv_i, h, eps):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def warm_start(opt, iopt, warm, rw, n):
-    """Last step's λ of rows with the same key × factor.  The keys are sorted and the rows
-    are made nearly in key order, so the key after the last one found is tried first
-    (a binary search otherwise)."""
-    lam = np.zeros(n)
-    (keys, values), row_key = warm, rw[10]
-    if not iopt[2] or len(keys) == 0:
-        return lam
+def warm_start(opt, iopt, warm, rw, n, lam):
+    """lam[:n] ← last step's λ of rows with the same key × factor (``_warm_fill``), 0 for
+    the others."""
+    lam[:n] = 0.0
+    if iopt[2] and len(warm[0]) > 0:
+        _warm_fill(opt[11], warm[0], warm[1], rw[10], n, lam)
+
+
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _warm_fill(factor, keys, values, row_key, n, lam):
+    """lam[i] ← factor × the λ of key row_key[i] in (keys, values), where found.  The keys
+    are sorted and the rows are made nearly in key order, so the key after the last one
+    found is tried first (a binary search otherwise)."""
     at = -1  # where the last key was found
     for i in range(n):
         key = row_key[i]
@@ -198,8 +205,7 @@ def warm_start(opt, iopt, warm, rw, n):
             if keys[found] != key:
                 continue
             at = found
-        lam[i] = opt[11] * values[at]
-    return lam
+        lam[i] = factor * values[at]
 
 
 @njit(cache=True, error_model="numpy")
@@ -260,16 +266,18 @@ def direct(bw, tree, h, rw, n, vel_free, grip, asleep):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def solve(bw, tree, rw, opt, iopt, warm, n, vel_free, grip, asleep):
-    """(status, λ, v, iterations, residual, solver) as solver.step.solve.  The row
-    responses (bw[3], bw[4]) are made here, for the rows the solver reads: all of them
-    for the direct and PGS solves, only the bounded ones (after the joints') for the
-    hybrid, whose joint rows the tree solves from their Jacobians.
+def solve(bw, tree, rw, opt, iopt, warm, n, vel_free, grip, asleep, lam0, lam, vel):
+    """(status, iterations, residual, solver) as solver.step.solve; λ into lam[:n], the
+    velocities into vel.  The row responses (bw[3], bw[4]) are made here, for the rows
+    the solver reads: all of them for the direct and PGS solves, only the bounded ones
+    (after the joints') for the hybrid, whose joint rows the tree solves from their
+    Jacobians.
 
     bw: the model arrays the solvers read (joint_bone, mass, inverse mass, row responses
     a and b, world inverse inertia, world inertia: m[1], m[15], m[16], ws[1], ws[2],
-    ws[6], ws[7]), a few arrays rather than all of m and ws, since every array handed to
-    an inlined part costs two reference-count calls; warm: the last step's (keys, λ)."""
+    ws[6], ws[7]); warm: the last step's (keys, λ); lam0 (≥ n): the warm start, made
+    here.  The solvers allocate, so each runs in a function of its own with reference
+    counting (``_direct_into``, ``_hybrid_into``, ``_pgs_into``)."""
     lo, hi, fric, kind = rw[4], rw[5], rw[8], rw[11]
     bilateral = True
     for i in range(n):
@@ -281,45 +289,67 @@ def solve(bw, tree, rw, opt, iopt, warm, n, vel_free, grip, asleep):
     while hybrid and ne < n and kind[ne] <= KIND_RHEOLOGY:
         ne += 1
     response(rw, ne, n, bw[2], bw[5], opt[0], bw[3], bw[4])
-    lam0 = warm_start(opt, iopt, warm, rw, n)
+    warm_start(opt, iopt, warm, rw, n, lam0)
     if method == METHOD_DIRECT or (method == METHOD_AUTO and bilateral):
         if not bilateral:
-            return FALLBACK, lam0, vel_free, 0, 0.0, SOLVER_DIRECT
-        code, lam, vel, residual = direct(bw, tree, opt[0], rw, n, vel_free, grip, asleep)
+            return FALLBACK, 0, 0.0, SOLVER_DIRECT
+        code, residual = _direct_into(bw, tree, opt[0], rw, n, vel_free, grip, asleep, lam, vel)
         if code == 2:
-            return FALLBACK, lam, vel, 0, 0.0, SOLVER_DIRECT
+            return FALLBACK, 0, 0.0, SOLVER_DIRECT
         if code == 0:
-            return OK, lam, vel, 1, residual, SOLVER_DIRECT
-        lam0 = lam
+            return OK, 1, residual, SOLVER_DIRECT
+        for i in range(n):
+            lam0[i] = lam[i]
     if hybrid:
-        ok, lam, vel, sweeps, residual = hybrid_solve(
-            bw, tree, opt[0], rw, n, ne, vel_free, lam0, iopt[1], grip, iopt[9], asleep
+        ok, sweeps, residual = _hybrid_into(
+            bw, tree, opt[0], rw, n, ne, vel_free, lam0, iopt[1], grip, iopt[9], asleep, lam, vel
         )
-        if not ok:
-            return FALLBACK, lam, vel, 0, 0.0, SOLVER_HYBRID
-        return OK, lam, vel, sweeps, residual, SOLVER_HYBRID
-    lam, vel, sweeps, residual = pgs_solve(
-        rw[0][:n],
-        rw[1][:n],
-        rw[2][:n],
-        rw[3][:n],
-        bw[3][:n],
-        bw[4][:n],
-        rw[4][:n],
-        rw[5][:n],
-        rw[6][:n],
-        rw[7][:n],
-        rw[8][:n],
-        rw[9][:n],
-        vel_free,
-        lam0,
-        iopt[1],
-        1e-12,
+        return (OK if ok else FALLBACK), sweeps, residual, SOLVER_HYBRID
+    sweeps, residual = _pgs_into(bw, rw, n, vel_free, lam0, iopt[1], lam, vel)
+    return OK, sweeps, residual, SOLVER_PGS
+
+
+@njit(cache=True, error_model="numpy", _nrt=True)
+def _direct_into(bw, tree, h, rw, n, vel_free, grip, asleep, lam_out, vel_out):
+    """``direct`` with its λ and velocities copied into lam_out[:n] and vel_out; (code,
+    residual)."""
+    code, lam, vel, residual = direct(bw, tree, h, rw, n, vel_free, grip, asleep)
+    _copy_out(lam, vel, n, lam_out, vel_out)
+    return code, residual
+
+
+@njit(cache=True, error_model="numpy", _nrt=True)
+def _hybrid_into(bw, tree, h, rw, n, ne, vel_free, lam0, iterations, grip, skip, asleep,
+                 lam_out, vel_out):  # fmt: skip
+    """``hybrid_solve`` with its λ and velocities copied out; (ok, sweeps, residual)."""
+    ok, lam, vel, sweeps, residual = hybrid_solve(
+        bw, tree, h, rw, n, ne, vel_free, lam0, iterations, grip, skip, asleep
     )
-    return OK, lam, vel, sweeps, residual, SOLVER_PGS
+    _copy_out(lam, vel, n, lam_out, vel_out)
+    return ok, sweeps, residual
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", _nrt=True)
+def _pgs_into(bw, rw, n, vel_free, lam0, iterations, lam_out, vel_out):
+    """``pgs_solve`` on the first n rows with its λ and velocities copied out; (sweeps,
+    residual)."""
+    lam, vel, sweeps, residual = pgs_solve(
+        rw[0][:n], rw[1][:n], rw[2][:n], rw[3][:n], bw[3][:n], bw[4][:n], rw[4][:n],
+        rw[5][:n], rw[6][:n], rw[7][:n], rw[8][:n], rw[9][:n], vel_free, lam0[:n],
+        iterations, 1e-12,
+    )  # fmt: skip
+    _copy_out(lam, vel, n, lam_out, vel_out)
+    return sweeps, residual
+
+
+@njit(cache=True, error_model="numpy")
+def _copy_out(lam, vel, n, lam_out, vel_out):
+    for i in range(n):
+        lam_out[i] = lam[i]
+    vel_out[:, :] = vel
+
+
+@njit(cache=True, error_model="numpy", _nrt=False)
 def report(rw, n, lam, rep_f):
     """rep_f[1:4] grip force, [4:7] grip torque, [7:10] pointer touch force."""
     for i in range(n):
@@ -333,11 +363,7 @@ def report(rw, n, lam, rep_f):
 
 @njit(cache=True, error_model="numpy")
 def step_kernel(flat, st, inp, out, rep_i, rep_f):
-    """One step of st into the caller's arrays (entry points: ``solver.fast.entry``), the
-    model's packed tuples rebuilt from its flat buffers here (solver.fast.flat).
-
-    The step's parts that take those tuples are inlined into it (``inline="always"``):
-    called, each would be passed every array of them, ~1 µs a call on the doll.
+    """One step of st into the caller's arrays (entry points: ``solver.fast.entry``).
 
     st (x, q, v, ω, q_sf, yielded, anchor, τ_avg, warm keys, warm λ, asleep, still);
     out (x, q, v, ω, q_sf, yielded, anchor, τ_avg, τ, asleep, still) is written and must not
@@ -345,13 +371,43 @@ def step_kernel(flat, st, inp, out, rep_i, rep_f):
     contacts, iterations, solver) and rep_f (10,) (residual, grip f, grip τ, touch f) are
     zeroed, then filled.  Returns (status, out, warm keys, warm λ, rep_i, rep_f); the warm
     keys and λ must be fresh arrays (fast_step keeps them in the State, and the model's
-    arrays are views that must not reach Python: solver.fast.flat)."""
+    arrays are views that must not reach Python: solver.fast.flat).
+
+    This function makes the step's arrays; the step itself is ``_step``, compiled without
+    numba's reference counting (``_nrt=False``): with it, every array bound to a name in
+    the inlined parts, and every array of a tuple handed to one, cost two calls to NRT's
+    counters (~4,400 a step on the doll, ~11 % of its time), although the model's views
+    have no owner to count.  Whatever allocates runs in functions of its own that keep
+    the counting (the solvers: ``solve``; the projection, the substep test, sleeping)."""
+    nb, nj, cap = len(st[0]), len(st[4]), row_capacity(flat)
+    keys, values = np.empty(cap, dtype=np.int64), np.empty(cap)
+    scratch = (
+        np.empty((nb, 6)), np.zeros(nb, dtype=np.bool_), np.empty(nb, dtype=np.bool_),
+        (np.empty(nb, dtype=np.bool_), np.empty(4)),
+        np.empty(cap), np.empty(cap), np.empty((nb, 6)),
+        (np.empty((nb, 3)), np.empty((nb, 3)), np.empty(nb, dtype=np.bool_)),
+        np.empty((nj, 3)), (np.empty((nj, 3)), np.empty((nj, 3))), np.empty(nj, dtype=np.bool_),
+    )  # fmt: skip
+    status, count = _step(flat, st, inp, out, rep_i, rep_f, scratch, keys, values)
+    if status != OK:
+        return _handed_back(status, out, rep_i, rep_f)
+    return OK, out, keys[:count], values[:count], rep_i, rep_f
+
+
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _step(flat, st, inp, out, rep_i, rep_f, scratch, keys, values):
+    """``step_kernel``'s step, the model's packed tuples rebuilt from its flat buffers
+    here (solver.fast.flat); returns (status, warm rows in keys/values).  The step's parts
+    that take those tuples are inlined into it (``inline="always"``) or called, compiled
+    without reference counting too.  scratch: v_free (nb,6), fresh and awake (nb,) bool,
+    wake's (loaded, pointer), warm λ and λ (rows), v (nb,6), integrate's, rheology's w
+    (nj,3), limit_rows' (gaps, turned), flowing joints (nj,) bool."""
     m, g, tree, ptree, ws, pws, opt, iopt = unflatten(flat)
+    vel_free, fresh, awake, wake_scratch, lam0, lam, vel = scratch[:7]
+    integrate_scratch, w, limit_scratch, flows = scratch[7:]
     pos, quat = st[0], st[1]
     nb = len(pos)
     rw, rot, inv_i, inertia_w = ws[0], ws[5], ws[6], ws[7]
-    # The parts below get the few arrays of m they read, not all 22: every array handed
-    # to an inlined part costs two reference-count calls (see solve).
     joints = (m[0], m[1], m[2], m[3])  # parents, bones, anchors (post._gap2)
     rheo = (m[0], m[1], m[4], m[5], m[6], m[7], m[12], m[13], m[14])  # post.rheology_update
     out[5][:] = False
@@ -362,20 +418,17 @@ def step_kernel(flat, st, inp, out, rep_i, rep_f):
     nsub = substeps_needed(opt[0], iopt[6], m[0], m[1], m[16], m[20], st[8], st[9])
     if nsub > 1:
         rep_i[0] = nsub
-        return _handed_back(SUBSTEP, out, rep_i, rep_f)
-    for b in range(nb):
-        qmatrix(quat_at(quat, b), rot, b)
-        congruence(rot, b, m[18], b, inv_i, b)
-        congruence(rot, b, m[17], b, inertia_w, b)
+        return SUBSTEP, 0
+    frames(quat, m[17], m[18], rot, inertia_w, inv_i)
     if iopt[5] or inp[4][0] == MODE_TOUCH or iopt[10]:
         world_shapes(g, pos, quat, ws[8], ws[9])
-    asleep, fresh = out[9], np.zeros(nb, dtype=np.bool_)
-    wake(m[19], (g[0], g[6], g[7], g[8]), opt, iopt, st, inp, ws[8], out[9], out[10], fresh)
-    awake, movable = np.empty(nb, dtype=np.bool_), m[16]
+    asleep = out[9]
+    wake(m[19], (g[0], g[6], g[7], g[8]), opt, iopt, st, inp, ws[8], out[9], out[10], fresh,
+         wake_scratch)  # fmt: skip
+    movable = m[16]
     for b in range(nb):
         awake[b] = movable[b] > 0.0 and not asleep[b]
     t = tick(prof, on, 0, t)
-    vel_free = np.empty((nb, 6))
     free_velocity(m[16], opt, st[2], st[3], inv_i, (inp[0], inp[1], inp[4]), vel_free)
     for b in range(nb):
         if asleep[b]:
@@ -383,41 +436,45 @@ def step_kernel(flat, st, inp, out, rep_i, rep_f):
     t = tick(prof, on, 1, t)
     joint_part = prof[2]
     n, ncontact, grip0, ngrip = build_rows(
-        joints, rheo, limit_arrays(m), g, opt, iopt, st, rot, vel_free, inp, ws, asleep, awake
-    )
+        joints, rheo, limit_arrays(m), g, opt, iopt, st, rot, vel_free, inp, ws, asleep, awake,
+        limit_scratch,
+    )  # fmt: skip
     if n < 0:
-        return _handed_back(FALLBACK, out, rep_i, rep_f)
+        return FALLBACK, 0
     t = tick(prof, on, 3, t + (prof[2] - joint_part))  # build_rows timed its joint rows (2)
     regularize(rw, n, m[16], inv_i, opt[0], opt[6])
     t = tick(prof, on, 4, t)
     grip = (grip0, ngrip, inp[4][1])
     bw = (m[1], m[15], m[16], ws[1], ws[2], inv_i, inertia_w)
-    status, lam, vel, iters, residual, used = solve(
-        bw, tree, rw, opt, iopt, (st[8], st[9]), n, vel_free, grip, asleep
+    status, iters, residual, used = solve(
+        bw, tree, rw, opt, iopt, (st[8], st[9]), n, vel_free, grip, asleep, lam0, lam, vel
     )
     t = tick(prof, on, 5, t)
     if status or not state_ok(joints, opt, pos, quat, vel[:, :3], vel[:, 3:], False):
-        return _handed_back(FALLBACK, out, rep_i, rep_f)
-    integrate(m[17], m[18], opt[0], pos, quat, vel, rot, asleep, out[0], out[1], out[3])
+        return FALLBACK, 0
+    integrate(m[17], m[18], opt[0], pos, quat, vel, rot, asleep, out[0], out[1], out[3],
+              integrate_scratch)  # fmt: skip
     projected = needs_projection(joints, out[0], out[1], asleep)
     if projected and not project(m, joints, ptree, pws, out[0], out[1], asleep):
-        return _handed_back(FALLBACK, out, rep_i, rep_f)
+        return FALLBACK, 0
     gaps_known = gaps_within(projected, opt)
     if not state_ok(joints, opt, out[0], out[1], vel[:, :3], out[3], gaps_known):
-        return _handed_back(FALLBACK, out, rep_i, rep_f)
-    out[2][:, :] = vel[:, :3]
+        return FALLBACK, 0
+    for b in range(nb):  # (an array assigned to a slice needs reference counting)
+        for k in range(3):
+            out[2][b, k] = vel[b, k]
     t = tick(prof, on, 6, t)
-    rheology_update(rheo, opt, st[4:8], rw, n, lam, vel, ws[3], out[1], asleep, out[4:9])
+    rheology_update(rheo, opt, st[4:8], rw, n, lam, vel, ws[3], out[1], asleep, out[4:9], w)
     if iopt[10]:
-        flows = flowing_joints(m[7], m[13], m[14], out[5])
+        flowing_joints(m[7], m[13], m[14], out[5], flows)
         settle(m[19], asleep, out[10], out[2], out[3], m[1], flows, opt[0], opt[15], opt[16],
                opt[17], fresh)  # fmt: skip
-    keys, values = warm_table(rw, n, lam)
-    rep_i[0], rep_i[1], rep_i[2], rep_i[3] = len(keys), ncontact, iters, used
+    count = warm_table(rw, n, lam, keys, values)
+    rep_i[0], rep_i[1], rep_i[2], rep_i[3] = count, ncontact, iters, used
     rep_f[0] = residual
     report(rw, n, lam, rep_f)
     tick(prof, on, 7, t)
-    return OK, out, keys, values, rep_i, rep_f
+    return OK, count
 
 
 @njit(cache=True, error_model="numpy")
@@ -427,45 +484,45 @@ def _handed_back(status, out, rep_i, rep_f):
     return status, out, np.empty(0, dtype=np.int64), np.empty(0), rep_i, rep_f
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def warm_table(rw, n, lam):
-    """(keys, λ) of the rows that are not empty slots (solver.sleep), sorted by key for
-    the next step's binary search.  Keys are unique and the table is built nearly in key
-    order, so an insertion sort costs little more than the copy."""
-    keys, values = np.empty(n, dtype=np.int64), np.empty(n)
+@njit(cache=True, error_model="numpy", _nrt=False)
+def warm_table(rw, n, lam, keys, values):
+    """keys[:count], values[:count] ← the keys and λ of the rows that are not empty slots
+    (solver.sleep), sorted by key for the next step's binary search; returns count.  Keys
+    are unique and the table is built nearly in key order, so an insertion sort costs
+    little more than the copy."""
     count = 0
     for i in range(n):
         if not is_null(rw, i):
             keys[count], values[count] = rw[10][i], lam[i]
             count += 1
-    keys, values = keys[:count], values[:count]
     for i in range(1, count):
         key, value, k = keys[i], values[i], i - 1
         while k >= 0 and keys[k] > key:
             keys[k + 1], values[k + 1] = keys[k], values[k]
             k -= 1
         keys[k + 1], values[k + 1] = key, value
-    return keys, values
+    return count
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def wake(island, shapes, opt, iopt, st, inp, centre, asleep, still, fresh):
+def wake(island, shapes, opt, iopt, st, inp, centre, asleep, still, fresh, scratch):
     """asleep, still (nb,) ← the state's, then wake what this step touches (solver.sleep:
     loads, the grip, a free pointer, moving neighbours); all awake when sleeping is off.
     island: m[19]; shapes: the geometry's shape bodies, bounds and pairs (g[0], g[6],
-    g[7], g[8])."""
+    g[7], g[8]); scratch: (loaded (nb,) bool, pointer (4,))."""
     nb, was_asleep, was_still = len(asleep), st[10], st[11]
     for b in range(nb):
         asleep[b], still[b] = (was_asleep[b], was_still[b]) if iopt[10] else (False, 0.0)
     if not iopt[10]:
         return
     force, torque, pvec, ivec = inp[0], inp[1], inp[2], inp[4]
-    loaded = np.zeros(nb, dtype=np.bool_)
+    loaded, pointer = scratch
+    loaded[:] = False
     for b in range(nb):
         for k in range(3):
             if (ivec[3] and force[b, k] != 0.0) or (ivec[4] and torque[b, k] != 0.0):
                 loaded[b] = True
-    pointer = np.zeros(4)
+    pointer[:] = 0.0
     if ivec[0] == MODE_TOUCH:
         for k in range(3):
             pointer[k] = pvec[k] - opt[0] * pvec[7 + k]
@@ -477,11 +534,10 @@ def wake(island, shapes, opt, iopt, st, inp, centre, asleep, still, fresh):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def flowing_joints(has, plastic, finite_yield, yielded):
-    """(nj,) bool: joints with rheology on the three-element rows (solver.joints.flowing);
-    has, plastic, finite_yield: m[7], m[13], m[14]."""
+def flowing_joints(has, plastic, finite_yield, yielded, out):
+    """out (nj,) bool ← joints with rheology on the three-element rows
+    (solver.joints.flowing); has, plastic, finite_yield: m[7], m[13], m[14]."""
     nj = len(has)
-    out = np.zeros(nj, dtype=np.bool_)
     for j in range(nj):
         out[j] = has[j] and flowing(plastic, finite_yield, yielded, j)
     return out

@@ -208,3 +208,13 @@ def congruence(rot, i, inner, j, out, o):
         t2 += rot[i, a, 2] * inner[j, 2, 2]
         for b in range(3):
             out[o, a, b] = t0 * rot[i, b, 0] + t1 * rot[i, b, 1] + t2 * rot[i, b, 2]
+
+
+@njit(cache=True, error_model="numpy", _nrt=False)
+def frames(quat, inertia, inv_inertia, rot, inertia_w, inv_i):
+    """rot, inertia_w, inv_i (nb,3,3) ← each body's rotation R(q), world inertia R I Rᵀ
+    and its inverse R I⁻¹ Rᵀ (inertia, inv_inertia: the bodies' own, m[17], m[18])."""
+    for b in range(len(quat)):
+        qmatrix(quat_at(quat, b), rot, b)
+        congruence(rot, b, inv_inertia, b, inv_i, b)
+        congruence(rot, b, inertia, b, inertia_w, b)

@@ -22,8 +22,8 @@ from numba import njit
 
 from solver.fast.kin import (
     add,
-    congruence,
     dot,
+    frames,
     matvec,
     neg,
     norm,
@@ -61,18 +61,20 @@ def _omega_from_momentum(q, mom, inv_inertia, b, rot):
     return matvec(rot, b, matvec(inv_inertia, b, tmatvec(rot, b, mom)))
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def integrate(inertia, inv_inertia, h, pos, quat, vel, rot, asleep, out_pos, out_quat, out_omega):
+@njit(cache=True, error_model="numpy", _nrt=False)
+def integrate(inertia, inv_inertia, h, pos, quat, vel, rot, asleep, out_pos, out_quat, out_omega,
+              scratch):  # fmt: skip
     """Semi-implicit Euler in momentum form with the implicit midpoint rotation rate.
     rot (nb,3,3) holds R(q[t]) on entry and R(q[t+1]) on return.  Sleeping bodies
-    (asleep (nb,) bool) keep their pose, at rest.
+    (asleep (nb,) bool) keep their pose, at rest.  scratch: (rates (nb,3), momenta
+    (nb,3), done (nb,) bool).
 
     The midpoint passes run pass by pass over all bodies (the bodies' chains are
     independent, so the processor overlaps them; body by body it waits on each pass's
     latency), and a body's passes stop once one returns its rate unchanged: every later
     pass would repeat it exactly, so the result is bit for bit that of all passes."""
     nb = len(pos)
-    rates, moms, done = np.empty((nb, 3)), np.empty((nb, 3)), np.empty(nb, np.bool_)
+    rates, moms, done = scratch
     for b in range(nb):
         done[b] = asleep[b]
         if asleep[b]:
@@ -115,7 +117,7 @@ def _gap2(joints, pos, quat, j):
     return dot(d, d)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _awake_gap2(joints, pos, quat, asleep):
     """The square of the largest anchor distance (m²) of the joints of awake bodies (0
     when none); joints as ``_gap2``'s."""
@@ -135,7 +137,7 @@ def gaps_within(projected, opt):
     return not projected and opt[10] >= PROJECT_TOL
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def state_ok(joints, opt, pos, quat, lin, ang, gaps_known):
     """False when the monitor (solver.monitor.check_state) would raise; joints as
     ``_gap2``'s.  Branch-free over the bodies: 0·x is 0 for every finite x and NaN
@@ -163,7 +165,7 @@ def state_ok(joints, opt, pos, quat, lin, ang, gaps_known):
     return within
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def response(rw, start, n, inv_mass, inv_i, h, resp_a, resp_b):
     """Velocity change per unit row force: h M⁻¹ jac, per side (0 for the world), of
     rows start … n − 1."""
@@ -229,7 +231,7 @@ def needs_projection(joints, pos, quat, asleep):
     return _awake_gap2(joints, pos, quat, asleep) > PROJECT_TOL * PROJECT_TOL
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", _nrt=True)
 def project(m, joints, tree, pws, pos, quat, asleep):
     """Pull joint anchors together in place (solver.stabilize.project_joints) when
     ``needs_projection`` (the caller asks first); False if the projection system is
@@ -247,10 +249,7 @@ def project(m, joints, tree, pws, pos, quat, asleep):
     for k in range(PROJECT_ROUNDS):
         if k > 0 and not needs_projection(joints, pos, quat, asleep):
             break
-        for b in range(nb):
-            qmatrix(quat_at(quat, b), rot, b)
-            congruence(rot, b, m[18], b, inv_i, b)
-            congruence(rot, b, m[17], b, inertia_w, b)
+        frames(quat, m[17], m[18], rot, inertia_w, inv_i)
         n = anchor_rows(joints, pos, rot, pos, 1.0, 1.0, False, asleep, prw, 0)
         response(prw, 0, n, m[16], inv_i, 1.0, pa, pb)
         prw[6][:n] = PROJECT_RIDGE
@@ -271,20 +270,21 @@ def project(m, joints, tree, pws, pos, quat, asleep):
     return True
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def rheology_update(rheo, opt, prev, rw, n, lam, vel, rheo_joint, quat, asleep, out):
+@njit(cache=True, error_model="numpy", _nrt=False)
+def rheology_update(rheo, opt, prev, rw, n, lam, vel, rheo_joint, quat, asleep, out, w):
     """q_sf, yield flags, anchors, torque filter and torques after the solve; the joints
     of sleeping bodies (asleep) keep their state (their torque reads 0: no rows).
     rheo: the model's joint parents, bones, K_f, D_f, D_d, has rheology, yield torque,
     plastic, finite yield (m[0], m[1], m[4]–m[7], m[12]–m[14]); prev: the state's q_sf,
-    yield flags, anchors, torque filter (st[4:8])."""
+    yield flags, anchors, torque filter (st[4:8]); w (nj, 3): scratch (the rheology rows'
+    velocities)."""
     parent, bone, kf, df, dd, has, yield_, plastic, finite_yield = rheo
     q_sf0, yielded0, anchor0, avg0 = prev
     q_sf, yielded, anchor, avg, torque = out
     h = opt[0]
     nj, body_a, body_b, jac_a, jac_b, kind = len(parent), rw[0], rw[1], rw[2], rw[3], rw[11]
     torque[:, :] = 0.0
-    w = np.zeros((nj, 3))
+    w[:, :] = 0.0
     slot = 0
     for i in range(n):
         if kind[i] != KIND_RHEOLOGY:

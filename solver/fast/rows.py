@@ -108,7 +108,7 @@ def is_null(rw, i):
     return (rw[0][i] < 0) & (rw[1][i] < 0)
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def anchor_rows(joints, pos, rot, omega, h, erp, arc, asleep, rw, n):
     """Three hard rows per joint (anchors pushed at their midpoint), bias (erp·C + N_c − N_p)/h.
 
@@ -164,7 +164,7 @@ def flowing(plastic, finite_yield, yielded, j):
     return plastic[j] and (yielded[j] or not finite_yield[j])
 
 
-@njit(cache=True, error_model="numpy", inline="always")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def rheology_rows(rheo, quat, rot, h, q_sf, yielded, anchor, asleep, rheo_joint, rw, n):
     """Three compliant rows per joint with rheology, on the parent's axes a_k = R_p e_k:
     Voigt C = 1/(D_f + K_f h), bias K_f δ/(D_f + K_f h), δ = log(q_rel ⊗ anchor⁻¹);
@@ -225,16 +225,17 @@ def limit_arrays(m):
     return (m[0], m[1], m[8], m[9], m[10], m[11], m[21])
 
 
-@njit(cache=True, error_model="numpy", inline="always")
-def limit_rows(limits, quat, rot, h, erp, margin, asleep, rw, n):
+@njit(cache=True, error_model="numpy", _nrt=False)
+def limit_rows(limits, quat, rot, h, erp, margin, asleep, rw, n, gaps, turned):
     """One-sided rows (λ ≥ 0) for limits within ``margin``: swing rows of every joint,
     then twist-low, then twist-high; bias C/h when C ≥ 0 (speculative) else erp·C/h.
     swing θ = acos(d·d'), C = swing − θ, axis −R_p (d × d')/|d × d'|;
     twist φ = 2 atan2(q.xyz·d, q.w) wrapped to [−π, π), C = φ − lo or hi − φ, axis ±R_p d'.
     Joints of sleeping bodies (asleep) have none.  Each joint's C and d' are computed
-    once (``limit_gaps``), the rows then made in their order."""
+    once (``limit_gaps``, into the scratch arrays gaps and turned (nj, 3)), the rows
+    then made in their order."""
     parent, bone, axis_rest = limits[0], limits[1], limits[2]
-    gaps, turned = limit_gaps(limits, quat, asleep)
+    limit_gaps(limits, quat, asleep, gaps, turned)
     for slot in range(3):
         for j in range(len(parent)):
             c = gaps[j, slot]
@@ -260,16 +261,15 @@ def limit_rows(limits, quat, rot, h, erp, margin, asleep, rw, n):
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def limit_gaps(limits, quat, asleep):
-    """((nj, 3) C of the swing, twist-low and twist-high limits, (nj, 3) d' = q_rel d)
-    of every awake joint (``limit_rows``).  A C that cannot be below the margin is +∞,
+def limit_gaps(limits, quat, asleep, gaps, turned):
+    """gaps (nj, 3) ← C of the swing, twist-low and twist-high limits, turned (nj, 3) ←
+    d' = q_rel d, of every awake joint (``limit_rows``).  A C that cannot be below the margin is +∞,
     its angle not computed: a joint well inside its limits by the thresholds
     (``limit_thresholds``: an infinite limit is never reached), which compare d·d' and
     the twist's tangent without acos or atan2 and keep a 10⁻⁹ rad margin over the
     rounding of either, so the rows made are exactly those the angles give."""
     parent, bone, axis_rest, swing, tw_lo, tw_hi, thresholds = limits  # limit_arrays
     nj = len(parent)
-    gaps, turned = np.empty((nj, 3)), np.empty((nj, 3))
     for j in range(nj):
         if asleep[bone[j]]:
             continue
@@ -290,7 +290,6 @@ def limit_gaps(limits, quat, asleep):
         if not inside:
             twist = _wrap(2.0 * math.atan2(along, w))
             gaps[j, 1], gaps[j, 2] = twist - tw_lo[j], tw_hi[j] - twist
-    return gaps, turned
 
 
 LIMIT_SLACK = 1e-9

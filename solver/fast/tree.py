@@ -94,7 +94,7 @@ def chol_solve(lo, m, b):
     backward(lo, m, b)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=True)
 def _chol_block(dm, i, m, sign):
     """sign·dm[i, :m, :m] = L Δ Lᵀ (lower triangle read) in place: L's unit-lower part
     below the diagonal, 1/Δ_jj on it (the block solves multiply instead of divide; no
@@ -170,7 +170,7 @@ def node_rows(i, nb, rheo_start, out):
     return first + 3
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def init_nodes(seq, nseq, nb, rw, vel_free, h, mass, inertia_w, rows, size, dm, z):
     """D_i and right-hand sides z_i before elimination."""
     for q in range(nseq):
@@ -251,7 +251,7 @@ def _upper_left_zero(g):
     return zero
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def tree_factor(seq, nseq, parent, nb, rw, rows, size, tw):
     """Factor the forest's system in place, children first (module docstring): each
     D_i = ±L Δ Lᵀ, Y_i = L⁻¹ K_ip, D_p −= ±Y_iᵀ Δ⁻¹ Y_i; in the same pass, the forward half of
@@ -349,7 +349,7 @@ def forward_pass(seq, nseq, parent, nb, size, tw, x, fwd, fwd_tag):
             _fold_node(i, p, m, size[p], 1.0 if i < nb else -1.0, dm, y, x)
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def backward_pass(seq, nseq, parent, nb, size, tw, x, bwd, bwd_tag):
     """x_i = sign·L⁻ᵀ Δ⁻¹ (L⁻¹ z_i − Y x_p), parents first (``tree_substitute``)."""
     dm, y = tw[0], tw[1]
@@ -372,7 +372,7 @@ def backward_pass(seq, nseq, parent, nb, size, tw, x, bwd, bwd_tag):
             x[i, k] *= sign
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def forest_sequence(tree, nb, movable, free_grip, ngrip, body, asleep, joint_bone):
     """Fill the elimination sequence (seq, parent, rows, size of ``tree``) for the joint
     forest and, with ngrip > 0, the grip's node of the rows free_grip[:ngrip], a leaf of

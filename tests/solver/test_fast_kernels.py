@@ -296,7 +296,11 @@ def _fast_limit_rows(flat, body_quat, body_rot):
     m, _, _, _, ws, _, opt, _ = unflatten(flat)
     asleep = np.zeros(len(body_quat), dtype=np.bool_)
     limits = limit_arrays(m)
-    return limit_rows(limits, body_quat, body_rot, opt[0], opt[1], opt[5], asleep, ws[0], 0)
+    nj = len(limits[0])
+    gaps, turned = np.empty((nj, 3)), np.empty((nj, 3))
+    return limit_rows(
+        limits, body_quat, body_rot, opt[0], opt[1], opt[5], asleep, ws[0], 0, gaps, turned
+    )
 
 
 def _near(rng, edge: float, far: tuple[float, float]) -> float:
