@@ -20,10 +20,11 @@ step it hands back).
 
 from __future__ import annotations
 
+import numpy as np
 from numba import njit
 
 from solver.fast.flat import NLEAF, SCHEMA, leaf
-from solver.fast.kernel import OK, step_kernel
+from solver.fast.kernel import OK, _step, step_kernel
 
 
 @njit(cache=True, error_model="numpy")
@@ -41,14 +42,44 @@ def fast_kernel(flat, prev, keys, lam, inp, out, rep_i, rep_f):
 
 _SET = ("f3", "f4", "f3", "f3", "f3", "b", "f4", "f", "f3", "b", "f")  # x … τ, asleep, still
 NSET = len(_SET)
-SIM_SCHEMA = (*SCHEMA, _SET, _SET, ("i", "f", "i"), "i", "f")
+_SCRATCH = ("f6", "b", "b", ("b", "f"), "f", "f", "f6", ("f3", "f3", "b"), "f3", ("f3", "f3"),
+            "b", "i", "f")  # fmt: skip
+SIM_SCHEMA = (*SCHEMA, _SET, _SET, ("i", "f", "i"), "i", "f", _SCRATCH)
 """A Sim's arrays (flat.flatten): its own copy of the packed model (SCHEMA: its
 workspaces are the Sim's alone), two state sets, warm (keys, λ, count (1,)) with room for
-every row, rep_i (4,), rep_f (10,).  One set of buffers holds them all, so a step unboxes
-ten arrays for all of them."""
+every row, rep_i (4,), rep_f (10,), the step's scratch arrays (``scratch_arrays``).  One
+set of buffers holds them all, so a step unboxes ten arrays for all of them and
+allocates none."""
 
 
-@njit(cache=True)
+def scratch_arrays(nb: int, nj: int, rows: int) -> tuple:
+    """The arrays kernel._step works in, as kernel.step_kernel makes them every step
+    (nb bodies, nj joints, room for ``rows`` rows), then its warm keys and λ: kinds as
+    _SCRATCH."""
+    e, b = np.empty, np.bool_
+    return (
+        e((nb, 6)), e(nb, b), e(nb, b), (e(nb, b), e(4)), e(rows), e(rows), e((nb, 6)),
+        (e((nb, 3)), e((nb, 3)), e(nb, b)), e((nj, 3)), (e((nj, 3)), e((nj, 3))), e(nj, b),
+        e(rows, np.int64), e(rows),
+    )  # fmt: skip
+
+
+@njit(cache=True, _nrt=True)  # returns views: never without NRT (kernel._step)
+def _scratch(flat, k):
+    """The scratch arrays whose first leaf is k of a Sim's flat buffers: (the step's
+    scratch tuple, warm keys, warm λ)."""
+    f, f3, f6, i, b, lay = flat[0], flat[1], flat[3], flat[6], flat[8], flat[9]
+    scratch = (
+        leaf(f6, lay, k), leaf(b, lay, k + 1), leaf(b, lay, k + 2),
+        (leaf(b, lay, k + 3), leaf(f, lay, k + 4)), leaf(f, lay, k + 5), leaf(f, lay, k + 6),
+        leaf(f6, lay, k + 7), (leaf(f3, lay, k + 8), leaf(f3, lay, k + 9), leaf(b, lay, k + 10)),
+        leaf(f3, lay, k + 11), (leaf(f3, lay, k + 12), leaf(f3, lay, k + 13)),
+        leaf(b, lay, k + 14),
+    )  # fmt: skip
+    return scratch, leaf(i, lay, k + 15), leaf(f, lay, k + 16)
+
+
+@njit(cache=True, _nrt=True)  # returns views: never without NRT (kernel._step)
 def _state_set(flat, k):
     """The state set whose first leaf is k of a Sim's flat buffers."""
     f, f3, f4, b, lay = flat[0], flat[1], flat[2], flat[8], flat[9]
@@ -59,24 +90,30 @@ def _state_set(flat, k):
     )  # fmt: skip
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def inplace_kernel(flat, phase, inp):
     """``fast_kernel`` on a Sim's arrays, the flat buffers of SIM_SCHEMA (the model's
     leaves first, so they are also the model's flat): reads state set ``phase`` (0 or
     1), writes the other (the Sim then flips phase), replaces the warm keys and λ, fills
     rep_i and rep_f.  Returns (status, substeps asked for); on a status other than OK
-    ``phase`` and the warm keys are as they were."""
+    ``phase`` and the warm keys are as they were.  It runs kernel._step on the Sim's
+    scratch arrays: a Sim's step allocates nothing and, outside the solvers, counts no
+    references (compiled without: ``_nrt=False``, which also unboxes its arguments
+    without making numba's wrappers for them)."""
     f, i, lay = flat[0], flat[6], flat[9]
-    st, out = _state_set(flat, NLEAF + NSET * phase), _state_set(flat, NLEAF + NSET - NSET * phase)
+    prev = _state_set(flat, NLEAF + NSET * phase)
+    out = _state_set(flat, NLEAF + NSET - NSET * phase)
     w = NLEAF + 2 * NSET
     keys, lam, count = leaf(i, lay, w), leaf(f, lay, w + 1), leaf(i, lay, w + 2)
     rep_i, rep_f = leaf(i, lay, w + 3), leaf(f, lay, w + 4)
+    scratch, new_keys, new_lam = _scratch(flat, w + 5)
     nw = count[0]
-    status, new_keys, new_lam = fast_kernel(flat, st, keys[:nw], lam[:nw], inp, out, rep_i, rep_f)
+    st = (prev[0], prev[1], prev[2], prev[3], prev[4], prev[5], prev[6], prev[7], keys[:nw],
+          lam[:nw], prev[9], prev[10])  # fmt: skip
+    status, n = _step(flat, st, inp, out, rep_i, rep_f, scratch, new_keys, new_lam)
     if status != OK:
         return status, rep_i[0]
-    n = len(new_keys)
-    keys[:n] = new_keys
-    lam[:n] = new_lam
+    for r in range(n):
+        keys[r], lam[r] = new_keys[r], new_lam[r]
     count[0] = n
     return OK, 0

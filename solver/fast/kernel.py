@@ -382,7 +382,7 @@ def step_kernel(flat, st, inp, out, rep_i, rep_f):
     nb, nj, cap = len(st[0]), len(st[4]), row_capacity(flat)
     keys, values = np.empty(cap, dtype=np.int64), np.empty(cap)
     scratch = (
-        np.empty((nb, 6)), np.zeros(nb, dtype=np.bool_), np.empty(nb, dtype=np.bool_),
+        np.empty((nb, 6)), np.empty(nb, dtype=np.bool_), np.empty(nb, dtype=np.bool_),
         (np.empty(nb, dtype=np.bool_), np.empty(4)),
         np.empty(cap), np.empty(cap), np.empty((nb, 6)),
         (np.empty((nb, 3)), np.empty((nb, 3)), np.empty(nb, dtype=np.bool_)),
@@ -401,7 +401,9 @@ def _step(flat, st, inp, out, rep_i, rep_f, scratch, keys, values):
     that take those tuples are inlined into it (``inline="always"``) or called, compiled
     without reference counting too.  scratch: v_free (nb,6), fresh and awake (nb,) bool,
     wake's (loaded, pointer), warm λ and λ (rows), v (nb,6), integrate's, rheology's w
-    (nj,3), limit_rows' (gaps, turned), flowing joints (nj,) bool."""
+    (nj,3), limit_rows' (gaps, turned), flowing joints (nj,) bool: whatever they hold on
+    entry (a Sim passes the same arrays every step: entry.scratch_arrays) is overwritten
+    before it is read."""
     m, g, tree, ptree, ws, pws, opt, iopt = unflatten(flat)
     vel_free, fresh, awake, wake_scratch, lam0, lam, vel = scratch[:7]
     integrate_scratch, w, limit_scratch, flows = scratch[7:]
@@ -411,6 +413,7 @@ def _step(flat, st, inp, out, rep_i, rep_f, scratch, keys, values):
     joints = (m[0], m[1], m[2], m[3])  # parents, bones, anchors (post._gap2)
     rheo = (m[0], m[1], m[4], m[5], m[6], m[7], m[12], m[13], m[14])  # post.rheology_update
     out[5][:] = False
+    fresh[:] = False
     rep_i[:] = 0
     rep_f[:] = 0
     prof, on = ws[10], iopt[7]

@@ -7,10 +7,16 @@ Regenerate them only on purpose::
 
     PUPPETCLI_REGEN_GOLDEN=1 python -m pytest tests/puppetcli/test_render_golden.py
 
-then look at them again.  A picture matches when the mean absolute difference
-is below ``MEAN_TOLERANCE`` grey levels and fewer than ``OUTLIER_SHARE`` of its
-pixels differ by more than ``OUTLIER_LEVEL`` in any channel, which absorbs
-anti-aliasing differences between OpenCV builds but not a moved limb.
+then look at them again.  Pictures are compared pixel against neighbourhood: a
+pixel's difference is the smallest, over the other picture's 3 × 3 pixels around it, of
+the largest channel difference, taken both ways.  They match when its mean is below
+``MEAN_TOLERANCE`` grey levels and fewer than ``OUTLIER_SHARE`` of the pixels differ by
+more than ``OUTLIER_LEVEL``.  That absorbs anti-aliasing and one-pixel edge shifts
+between OpenCV builds but not a moved limb.  Measured (96 × 96, every view): OpenCV
+5.1.0 against goldens drawn with 5.0.0, mean 0.14–0.16 and 0.07 % outliers (a plain
+pixel-to-pixel comparison: 1.5 levels and 1.7 %, which failed the previous 1 % bound);
+the arm moved 10° (the test below), mean 0.8–1.0 and 0.9 %; 5°, 0.26–0.33 %; another
+view, 16–35 % outliers.
 """
 
 from __future__ import annotations
@@ -29,9 +35,9 @@ GOLDEN = Path(__file__).resolve().parent / "golden"
 REGENERATE = os.environ.get("PUPPETCLI_REGEN_GOLDEN") == "1"
 VIEWS = ("front", "side", "top", "iso")
 SIZE = (96, 96)
-MEAN_TOLERANCE = 3.0
+MEAN_TOLERANCE = 0.5
 OUTLIER_LEVEL = 32
-OUTLIER_SHARE = 0.01
+OUTLIER_SHARE = 0.003
 
 
 def picture(view: str) -> np.ndarray:
@@ -41,11 +47,22 @@ def picture(view: str) -> np.ndarray:
     return render_pose(skel, poses[0], spec, frame_poses(skel, poses, spec, view, SIZE))
 
 
+def _nearest(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(h, w): for each pixel of a, the smallest over b's 3 × 3 pixels around it of the
+    largest channel difference (b's edge repeated beyond its border)."""
+    a, b = a.astype(int), b.astype(int)
+    h, w = a.shape[:2]
+    padded = np.pad(b, ((1, 1), (1, 1), (0, 0)), mode="edge")
+    shifts = [padded[dy : dy + h, dx : dx + w] for dy in range(3) for dx in range(3)]
+    return np.min([np.abs(a - s).max(axis=2) for s in shifts], axis=0)
+
+
 def difference(a: np.ndarray, b: np.ndarray) -> tuple[float, float]:
-    """(mean absolute difference in grey levels, share of pixels off by > OUTLIER_LEVEL)."""
+    """(mean neighbourhood difference in grey levels, share of pixels off by more than
+    OUTLIER_LEVEL), the worse of a against b and b against a (module docstring)."""
     assert a.shape == b.shape
-    diff = np.abs(a.astype(int) - b.astype(int))
-    return float(diff.mean()), float((diff.max(axis=2) > OUTLIER_LEVEL).mean())
+    both = [_nearest(a, b), _nearest(b, a)]
+    return max(float(d.mean()) for d in both), max(float((d > OUTLIER_LEVEL).mean()) for d in both)
 
 
 def matches(a: np.ndarray, b: np.ndarray) -> bool:

@@ -12,6 +12,7 @@ import pytest
 from rigbuild import chain
 from test_fast import box_chain, doll_inputs
 
+from puppetcli.bench import doll_scenes
 from puppetcli.rigfile import load_rig
 from solver.errors import SimulationError
 from solver.fast import fast_step
@@ -107,3 +108,24 @@ def test_two_sims_of_one_model_step_independently():
             alone.advance(push)
         assert same(sim.state, alone.state)
     assert not same(together[0].state, together[1].state)
+
+
+def test_a_doll_woken_by_a_push_falls_asleep_again_identically():
+    # A Sim reuses its scratch arrays every step (entry.scratch_arrays): the flags of the
+    # bodies a step wakes ("fresh": their rest timer restarts) must not carry over into
+    # the next, or a woken island would never fall asleep again.  The doll falls asleep
+    # (3 s alone), one step's push wakes the right leg, which then settles and sleeps.
+    model = doll_scenes()["doll"].with_options(h=0.005)
+    state = initial_state(model)
+    for _ in range(600):
+        state, _ = fast_step(model, state)
+    assert state.body_asleep[1:].all()  # (the hips, clamped, never sleep: solver.sleep)
+    force = np.zeros((model.nbody, 3))
+    force[model.body_names.index("shin_r")] = [5.0, 0.0, 0.0]
+    inputs = [StepInput(body_force=force)] + [None] * 300
+    lockstep(model, state, inputs)
+    awake_after = []
+    for inp in inputs:
+        state, _ = fast_step(model, state, inp)
+        awake_after.append(not state.body_asleep[1:].all())
+    assert awake_after[0] and not awake_after[-1]  # woken, then asleep again
