@@ -9,8 +9,8 @@ caller made:
 - ``inplace_kernel`` (``solver.fast.sim.Sim``): all of the Sim's arrays are views of one
   set of flat buffers, its own copy of the model's with the state after it (two sets of
   state arrays: it reads one, writes the other, and the Sim flips between them; the
-  warm keys and λ, the report), so a step unboxes 15 arrays (with the input's five) and
-  boxes none.
+  warm keys and λ, the report, the step's scratch arrays), so a step unboxes 15 arrays
+  (with the input's five), boxes none and allocates only inside the solvers.
 
 State tuples: prev, out (x, q, v, ω, q_sf, yielded, anchor, τ_avg, τ, asleep, still) with
 the warm keys and λ beside them; prev is read (except τ), out written.  They must not
