@@ -20,7 +20,6 @@ step it hands back).
 
 from __future__ import annotations
 
-import numpy as np
 from numba import njit
 
 from solver.fast.flat import NLEAF, SCHEMA, leaf
@@ -42,26 +41,14 @@ def fast_kernel(flat, prev, keys, lam, inp, out, rep_i, rep_f):
 
 _SET = ("f3", "f4", "f3", "f3", "f3", "b", "f4", "f", "f3", "b", "f")  # x … τ, asleep, still
 NSET = len(_SET)
-_SCRATCH = ("f6", "b", "b", ("b", "f"), "f", "f", "f6", ("f3", "f3", "b"), "f3", ("f3", "f3"),
-            "b", "i", "f")  # fmt: skip
+_SCRATCH = (("f6", "b", "b", ("b", "f"), "f", "f", "f6", ("f3", "f3", "b"), "f3", ("f3", "f3"),
+             "b"), "i", "f")  # fmt: skip
 SIM_SCHEMA = (*SCHEMA, _SET, _SET, ("i", "f", "i"), "i", "f", _SCRATCH)
 """A Sim's arrays (flat.flatten): its own copy of the packed model (SCHEMA: its
 workspaces are the Sim's alone), two state sets, warm (keys, λ, count (1,)) with room for
-every row, rep_i (4,), rep_f (10,), the step's scratch arrays (``scratch_arrays``).  One
+every row, rep_i (4,), rep_f (10,), the step's arrays (kernel.step_arrays).  One
 set of buffers holds them all, so a step unboxes ten arrays for all of them and
 allocates none."""
-
-
-def scratch_arrays(nb: int, nj: int, rows: int) -> tuple:
-    """The arrays kernel._step works in, as kernel.step_kernel makes them every step
-    (nb bodies, nj joints, room for ``rows`` rows), then its warm keys and λ: kinds as
-    _SCRATCH."""
-    e, b = np.empty, np.bool_
-    return (
-        e((nb, 6)), e(nb, b), e(nb, b), (e(nb, b), e(4)), e(rows), e(rows), e((nb, 6)),
-        (e((nb, 3)), e((nb, 3)), e(nb, b)), e((nj, 3)), (e((nj, 3)), e((nj, 3))), e(nj, b),
-        e(rows, np.int64), e(rows),
-    )  # fmt: skip
 
 
 @njit(cache=True, _nrt=True)  # returns views: never without NRT (kernel._step)

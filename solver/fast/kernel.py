@@ -379,19 +379,26 @@ def step_kernel(flat, st, inp, out, rep_i, rep_f):
     counters (~4,400 a step on the doll, ~11 % of its time), although the model's views
     have no owner to count.  Whatever allocates runs in functions of its own that keep
     the counting (the solvers: ``solve``; the projection, the substep test, sleeping)."""
-    nb, nj, cap = len(st[0]), len(st[4]), row_capacity(flat)
-    keys, values = np.empty(cap, dtype=np.int64), np.empty(cap)
-    scratch = (
-        np.empty((nb, 6)), np.empty(nb, dtype=np.bool_), np.empty(nb, dtype=np.bool_),
-        (np.empty(nb, dtype=np.bool_), np.empty(4)),
-        np.empty(cap), np.empty(cap), np.empty((nb, 6)),
-        (np.empty((nb, 3)), np.empty((nb, 3)), np.empty(nb, dtype=np.bool_)),
-        np.empty((nj, 3)), (np.empty((nj, 3)), np.empty((nj, 3))), np.empty(nj, dtype=np.bool_),
-    )  # fmt: skip
+    scratch, keys, values = step_arrays(len(st[0]), len(st[4]), row_capacity(flat))
     status, count = _step(flat, st, inp, out, rep_i, rep_f, scratch, keys, values)
     if status != OK:
         return _handed_back(status, out, rep_i, rep_f)
     return OK, out, keys[:count], values[:count], rep_i, rep_f
+
+
+@njit(cache=True, error_model="numpy")
+def step_arrays(nb, nj, rows):
+    """The arrays ``_step`` works in, for nb bodies, nj joints and room for ``rows`` rows:
+    (scratch, warm keys, warm λ), scratch as ``_step`` reads it.  step_kernel makes them
+    every step; a Sim once, kept in its flat buffers (entry.SIM_SCHEMA)."""
+    b = np.bool_
+    scratch = (
+        np.empty((nb, 6)), np.empty(nb, b), np.empty(nb, b), (np.empty(nb, b), np.empty(4)),
+        np.empty(rows), np.empty(rows), np.empty((nb, 6)),
+        (np.empty((nb, 3)), np.empty((nb, 3)), np.empty(nb, b)),
+        np.empty((nj, 3)), (np.empty((nj, 3)), np.empty((nj, 3))), np.empty(nj, b),
+    )  # fmt: skip
+    return scratch, np.empty(rows, np.int64), np.empty(rows)
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
@@ -402,7 +409,7 @@ def _step(flat, st, inp, out, rep_i, rep_f, scratch, keys, values):
     without reference counting too.  scratch: v_free (nb,6), fresh and awake (nb,) bool,
     wake's (loaded, pointer), warm λ and λ (rows), v (nb,6), integrate's, rheology's w
     (nj,3), limit_rows' (gaps, turned), flowing joints (nj,) bool: whatever they hold on
-    entry (a Sim passes the same arrays every step: entry.scratch_arrays) is overwritten
+    entry (a Sim passes the same arrays every step: ``step_arrays``) is overwritten
     before it is read."""
     m, g, tree, ptree, ws, pws, opt, iopt = unflatten(flat)
     vel_free, fresh, awake, wake_scratch, lam0, lam, vel = scratch[:7]

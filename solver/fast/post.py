@@ -109,8 +109,9 @@ def integrate(inertia, inv_inertia, h, pos, quat, vel, rot, asleep, out_pos, out
 @njit(cache=True, error_model="numpy", inline="always")
 def _gap2(joints, pos, quat, j):
     """The square of joint j's anchor distance (m²); joints: the model's joint parents,
-    bones and anchors (m[0], m[1], m[2], m[3]).  Inlined: called, each call counted its
-    six arrays in and out (12 reference-count calls, 16–48 calls a step)."""
+    bones and anchors (m[0], m[1], m[2], m[3]).  Inlined (16–48 uses a step): called
+    from a function with reference counting, each call counted its six arrays in and out
+    (12 calls to NRT); the step runs without it now (kernel._step), the projection with."""
     p, c, anc_p, anc_c = joints[0][j], joints[1][j], joints[2], joints[3]
     a = add(vec(pos, p), qrotate(quat_at(quat, p), vec(anc_p, j))) if p >= 0 else vec(anc_p, j)
     d = sub(add(vec(pos, c), qrotate(quat_at(quat, c), vec(anc_c, j))), a)

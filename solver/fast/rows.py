@@ -147,7 +147,7 @@ def _omega(omega, b):
 @njit(cache=True, error_model="numpy", inline="always")
 def q_rel(j, parent, bone, quat):
     """q_p⁻¹ ⊗ q_c of joint j (the world's q_p is the identity).  Inlined, as
-    ``flowing``: three arrays, three calls per joint a step."""
+    ``flowing``: three arrays, three uses per joint a step."""
     p = parent[j]
     qp = quat_at(quat, p) if p >= 0 else (1.0, 0.0, 0.0, 0.0)
     return qmul(qconj(qp), quat_at(quat, bone[j]))
@@ -158,9 +158,10 @@ def flowing(plastic, finite_yield, yielded, j):
     """Joint j uses the three-element row: finite D_d and yielded (or no yield torque).
 
     (Helpers called per joint or per row take single arrays, never the packed tuples:
-    passing a tuple of many arrays to a call costs far more than the call's work.  This
-    one is inlined: called, each of its three arrays cost two reference-count calls,
-    three times per joint a step.)"""
+    passing a tuple of many arrays to a call costs far more than the call's work where
+    references are counted.  This one is inlined: called from counted code, each of its
+    three arrays cost two reference-count calls, three times per joint a step; most of
+    the step runs uncounted now, kernel._step.)"""
     return plastic[j] and (yielded[j] or not finite_yield[j])
 
 
