@@ -111,7 +111,7 @@ def test_two_sims_of_one_model_step_independently():
 
 
 def test_a_doll_woken_by_a_push_falls_asleep_again_identically():
-    # A Sim reuses its scratch arrays every step (entry.scratch_arrays): the flags of the
+    # A Sim reuses its scratch arrays every step (kernel.step_arrays): the flags of the
     # bodies a step wakes ("fresh": their rest timer restarts) must not carry over into
     # the next, or a woken island would never fall asleep again.  The doll falls asleep
     # (3 s alone), one step's push wakes the right leg, which then settles and sleeps.
