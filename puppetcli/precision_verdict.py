@@ -13,9 +13,9 @@ Only measured points are compared: no curve is interpolated or extrapolated, so 
 claim never rests on a point nobody ran.  To compare at equal run time the study runs
 the faster settings again at the finest step planned to spend at most 90 % of the
 baseline's time (``precision.equal_time_rows``, EQUAL_TIME_BUDGET); those are measured
-points like the others.  The
-winner of a scene is the setting that beats the most baseline points, ties broken by
-the larger geometric-mean error ratio e_b / e over the points it beats.
+points like the others.  The winner of a scene is the setting that beats the most
+baseline points, ties broken by the larger geometric-mean error ratio e_b / e over the
+points it beats.
 
 The line also answers the dual question, the baseline's accuracy in less time
 (``as_accurate_for_less``), where "less" means below (1 − TIME_TIE) of the baseline's

@@ -33,10 +33,17 @@ def fast_kernel(flat, prev, keys, lam, inp, out, rep_i, rep_f):
     (10,) (residual, grip f, grip τ, touch f) receive the report.  Returns (status, warm
     keys (n,), warm λ (n,)); on SUBSTEP rep_i[0] is the number of substeps asked for, on
     any status but OK out holds nothing."""
-    st = (prev[0], prev[1], prev[2], prev[3], prev[4], prev[5], prev[6], prev[7], keys, lam,
-          prev[9], prev[10])  # fmt: skip
+    st = _with_warm(prev, keys, lam)
     status, _, new_keys, new_lam, _, _ = step_kernel(flat, st, inp, out, rep_i, rep_f)
     return status, new_keys, new_lam
+
+
+@njit(cache=True, error_model="numpy", inline="always")
+def _with_warm(prev, keys, lam):
+    """The step's st: prev's (x, q, v, ω, q_sf, yielded, anchor, τ_avg) and (asleep, still)
+    with the warm keys and λ between them (τ, prev[8], is not read)."""
+    return (prev[0], prev[1], prev[2], prev[3], prev[4], prev[5], prev[6], prev[7], keys, lam,
+            prev[9], prev[10])  # fmt: skip
 
 
 _SET = ("f3", "f4", "f3", "f3", "f3", "b", "f4", "f", "f3", "b", "f")  # x … τ, asleep, still
@@ -95,8 +102,7 @@ def inplace_kernel(flat, phase, inp):
     rep_i, rep_f = leaf(i, lay, w + 3), leaf(f, lay, w + 4)
     scratch, new_keys, new_lam = _scratch(flat, w + 5)
     nw = count[0]
-    st = (prev[0], prev[1], prev[2], prev[3], prev[4], prev[5], prev[6], prev[7], keys[:nw],
-          lam[:nw], prev[9], prev[10])  # fmt: skip
+    st = _with_warm(prev, keys[:nw], lam[:nw])
     status, n = _step(flat, st, inp, out, rep_i, rep_f, scratch, new_keys, new_lam)
     if status != OK:
         return status, rep_i[0]

@@ -24,6 +24,7 @@ from numba import njit
 from solver import hybrid
 from solver.fast.post import apply_rows
 from solver.fast.tree import (
+    ALL,
     backward_pass,
     forest_sequence,
     forward_pass,
@@ -98,16 +99,15 @@ def _schur(rw, its, nu, seq, nseq, parent, nb, size, tw, movable, x):
     return s_mat
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def _solve_exact(seq, nseq, parent, nb, movable, rows, size, tw, vel, lam, out, forward):
     """λ of the forest's rows and out = vel + y, with v_free replaced by ``vel``, from
     the right-hand sides of ``vel`` in tw[2] (init_rhs made them; forward False: init_nodes
     made them and tree_factor has run the forward pass)."""
     x = tw[2]
-    every = np.zeros(len(parent), np.int64)
     if forward:
-        forward_pass(seq, nseq, parent, nb, size, tw, x, every, 0)
-    backward_pass(seq, nseq, parent, nb, size, tw, x, every, 0)
+        forward_pass(seq, nseq, parent, nb, size, tw, x, parent, ALL)
+    backward_pass(seq, nseq, parent, nb, size, tw, x, parent, ALL)
     for b in range(nb):
         for k in range(6):
             out[b, k] = vel[b, k]

@@ -47,6 +47,10 @@ from solver.fast.tree6 import (
     take_down6,
 )
 
+ALL = -1
+"""The tag of ``tree_substitute``'s passes that takes every node (their tag array is not
+read: any int array of the nodes' length will do)."""
+
 
 @njit(cache=True, error_model="numpy")
 def chol(a, m):
@@ -325,7 +329,7 @@ def tree_substitute(seq, nseq, parent, nb, size, tw, x, fwd, fwd_tag, bwd, bwd_t
     solution out (body nodes: velocity change y; row nodes: λ).
 
     Only nodes with fwd[i] == fwd_tag take part in the forward pass and only nodes with
-    bwd[i] == bwd_tag are solved for (zero arrays and tags solve everything): a node
+    bwd[i] == bwd_tag are solved for (the tag ALL takes every node, its array unread): a node
     whose subtree has no right-hand side has nothing to pass up, and a node is solved
     from its parent alone, so a sparse right-hand side needs the forward pass only on
     the paths from its nodes to their roots, and the solution at some nodes only the
@@ -340,7 +344,7 @@ def forward_pass(seq, nseq, parent, nb, size, tw, x, fwd, fwd_tag):
     dm, y = tw[0], tw[1]
     for q in range(nseq):
         i = seq[q]
-        if fwd[i] != fwd_tag:
+        if fwd_tag != ALL and fwd[i] != fwd_tag:
             continue
         m = size[i]
         _forward_node(dm, i, m, x)
@@ -355,7 +359,7 @@ def backward_pass(seq, nseq, parent, nb, size, tw, x, bwd, bwd_tag):
     dm, y = tw[0], tw[1]
     for q in range(nseq - 1, -1, -1):
         i = seq[q]
-        if bwd[i] != bwd_tag:
+        if bwd_tag != ALL and bwd[i] != bwd_tag:
             continue
         p = parent[i]
         m = size[i]
@@ -397,7 +401,7 @@ def forest_sequence(tree, nb, movable, free_grip, ngrip, body, asleep, joint_bon
     return nseq
 
 
-@njit(cache=True, error_model="numpy")
+@njit(cache=True, error_model="numpy", _nrt=False)
 def tree_solve(seq, nseq, parent, nb, rw, vel_free, h, mass, inertia_w, rows, size, tw, lam):
     """λ of the two-sided rows by block elimination over the forest (module docstring).
 
@@ -408,8 +412,7 @@ def tree_solve(seq, nseq, parent, nb, rw, vel_free, h, mass, inertia_w, rows, si
     init_nodes(seq, nseq, nb, rw, vel_free, h, mass, inertia_w, rows, size, tw[0], w)
     if not tree_factor(seq, nseq, parent, nb, rw, rows, size, tw):  # (and the forward pass)
         return False
-    every = np.zeros(len(parent), np.int64)
-    backward_pass(seq, nseq, parent, nb, size, tw, w, every, 0)
+    backward_pass(seq, nseq, parent, nb, size, tw, w, parent, ALL)
     for q in range(nseq):
         i = seq[q]
         if i >= nb:
