@@ -59,9 +59,27 @@ def pgs_solve(
 ):  # fmt: skip
     """Returns (lam, vel, sweeps, residual); vel = vel_free + response to lam."""
     n = body_a.shape[0]
-    vel = vel_free.copy()
-    lam = lam0.copy()
-    diag = np.empty(n)
+    lam, vel = np.empty(n), np.empty_like(vel_free)
+    sweeps, residual = pgs_into(
+        n, body_a, body_b, jac_a, jac_b, resp_a, resp_b, lo, hi, comp, bias, fric_of, mu,
+        vel_free, lam0, iterations, tol, lam, vel, np.empty(n),
+    )  # fmt: skip
+    return lam, vel, sweeps, residual
+
+
+@njit(cache=True, _nrt=False)
+def pgs_into(
+    n, body_a, body_b, jac_a, jac_b, resp_a, resp_b, lo, hi, comp, bias, fric_of, mu,
+    vel_free, lam0, iterations, tol, lam, vel, diag,
+):  # fmt: skip
+    """``pgs_solve`` on the first n rows of the arrays, allocating nothing: λ into lam[:n],
+    the velocities into vel (the shape of vel_free); diag (≥ n) is scratch.  Returns
+    (sweeps, residual)."""
+    for b in range(vel_free.shape[0]):
+        for k in range(6):
+            vel[b, k] = vel_free[b, k]
+    for i in range(n):
+        lam[i] = lam0[i]
     for i in range(n):
         d = comp[i]
         for k in range(6):
@@ -90,7 +108,7 @@ def pgs_solve(
         lo_i, hi_i = _bounds(i, lam, lo, hi, fric_of, mu)
         target = min(max(lam[i] - r / diag[i], lo_i), hi_i)
         residual = max(residual, abs(lam[i] - target) * diag[i])
-    return lam, vel, sweeps, residual
+    return sweeps, residual
 
 
 @njit(cache=True)
@@ -103,8 +121,19 @@ def dense_pgs(q, c, lo, hi, fric_of, mu, lam0, iterations, tol):
     max_i |λ_i − proj(λ_i − r_i/Q_ii)|·Q_ii.
     """
     n = len(c)
-    lam = lam0.copy()
-    r = c.copy()
+    lam = np.empty(n)
+    sweeps, residual = dense_pgs_into(n, q, c, lo, hi, fric_of, mu, lam0, iterations, tol, lam,
+                                      np.empty(n))  # fmt: skip
+    return lam, sweeps, residual
+
+
+@njit(cache=True, _nrt=False)
+def dense_pgs_into(n, q, c, lo, hi, fric_of, mu, lam0, iterations, tol, lam, r):
+    """``dense_pgs`` on the first n rows, allocating nothing: λ into lam[:n]; r (≥ n) is
+    scratch.  Returns (sweeps, residual)."""
+    for i in range(n):
+        lam[i] = lam0[i]
+        r[i] = c[i]
     for i in range(n):
         if lam[i] != 0.0:
             for k in range(n):
@@ -134,4 +163,4 @@ def dense_pgs(q, c, lo, hi, fric_of, mu, lam0, iterations, tol):
         d = q[i, i] if q[i, i] > 1e-300 else 1e-300
         target = min(max(lam[i] - ri / d, lo_i), hi_i)
         residual = max(residual, abs(lam[i] - target) * d)
-    return lam, sweeps, residual
+    return sweeps, residual

@@ -10,7 +10,8 @@ caller made:
   set of flat buffers, its own copy of the model's with the state after it (two sets of
   state arrays: it reads one, writes the other, and the Sim flips between them; the
   warm keys and λ, the report, the step's scratch arrays), so a step unboxes 15 arrays
-  (with the input's five), boxes none and allocates only inside the solvers.
+  (with the input's five), boxes none and allocates nothing but the substep test's and
+  sleeping's few arrays (the solvers work in the step's scratch arrays).
 
 State tuples: prev, out (x, q, v, ω, q_sf, yielded, anchor, τ_avg, τ, asleep, still) with
 the warm keys and λ beside them; prev is read (except τ), out written.  They must not
@@ -48,8 +49,9 @@ def _with_warm(prev, keys, lam):
 
 _SET = ("f3", "f4", "f3", "f3", "f3", "b", "f4", "f", "f3", "b", "f")  # x … τ, asleep, still
 NSET = len(_SET)
+_SOLVERS = (("b",) * 3, ("i",) * 7, ("f",) * 7, ("f6", "f6"), "f")
 _SCRATCH = (("f6", "b", "b", ("b", "f"), "f", "f", "f6", ("f3", "f3", "b"), "f3", ("f3", "f3"),
-             "b"), "i", "f")  # fmt: skip
+             "b", _SOLVERS), "i", "f")  # fmt: skip
 SIM_SCHEMA = (*SCHEMA, _SET, _SET, ("i", "f", "i"), "i", "f", _SCRATCH)
 """A Sim's arrays (flat.flatten): its own copy of the packed model (SCHEMA: its
 workspaces are the Sim's alone), two state sets, warm (keys, λ, count (1,)) with room for
@@ -68,9 +70,24 @@ def _scratch(flat, k):
         (leaf(b, lay, k + 3), leaf(f, lay, k + 4)), leaf(f, lay, k + 5), leaf(f, lay, k + 6),
         leaf(f6, lay, k + 7), (leaf(f3, lay, k + 8), leaf(f3, lay, k + 9), leaf(b, lay, k + 10)),
         leaf(f3, lay, k + 11), (leaf(f3, lay, k + 12), leaf(f3, lay, k + 13)),
-        leaf(b, lay, k + 14),
+        leaf(b, lay, k + 14), _solvers(flat, k + 15),
     )  # fmt: skip
-    return scratch, leaf(i, lay, k + 15), leaf(f, lay, k + 16)
+    return scratch, leaf(i, lay, k + 35), leaf(f, lay, k + 36)
+
+
+@njit(cache=True, _nrt=True)  # returns views: never without NRT (kernel._step)
+def _solvers(flat, k):
+    """The solvers' scratch arrays (kernel.step_arrays) whose first leaf is k."""
+    f, f6, i, b, lay = flat[0], flat[3], flat[6], flat[8], flat[9]
+    return (
+        (leaf(b, lay, k), leaf(b, lay, k + 1), leaf(b, lay, k + 2)),
+        (leaf(i, lay, k + 3), leaf(i, lay, k + 4), leaf(i, lay, k + 5), leaf(i, lay, k + 6),
+         leaf(i, lay, k + 7), leaf(i, lay, k + 8), leaf(i, lay, k + 9)),
+        (leaf(f, lay, k + 10), leaf(f, lay, k + 11), leaf(f, lay, k + 12), leaf(f, lay, k + 13),
+         leaf(f, lay, k + 14), leaf(f, lay, k + 15), leaf(f, lay, k + 16)),
+        (leaf(f6, lay, k + 17), leaf(f6, lay, k + 18)),
+        leaf(f, lay, k + 19),
+    )  # fmt: skip
 
 
 @njit(cache=True, _nrt=True)  # returns views: never without NRT (kernel._step)
@@ -91,9 +108,9 @@ def inplace_kernel(flat, phase, inp):
     1), writes the other (the Sim then flips phase), replaces the warm keys and λ, fills
     rep_i and rep_f.  Returns (status, substeps asked for); on a status other than OK
     ``phase`` and the warm keys are as they were.  It runs kernel._step on the Sim's
-    scratch arrays: a Sim's step allocates nothing and, outside the solvers, counts no
-    references (compiled without: ``_nrt=False``, which also unboxes its arguments
-    without making numba's wrappers for them)."""
+    scratch arrays: outside the substep test and sleeping a Sim's step allocates nothing
+    and counts no references (compiled without: ``_nrt=False``, which also unboxes its
+    arguments without making numba's wrappers for them)."""
     f, i, lay = flat[0], flat[6], flat[9]
     prev = _state_set(flat, NLEAF + NSET * phase)
     out = _state_set(flat, NLEAF + NSET - NSET * phase)

@@ -135,6 +135,13 @@ def leaf(buf, lay, k):
     return carray(_row_pointer(buf, lay[k, 0]), (lay[k, 1],) + buf.shape[1:])
 
 
+@njit(cache=True, _nrt=True)  # returns a view: never without NRT (kernel._step)
+def square(buf, n):
+    """The first n² entries of buf (1-D, C-contiguous) as an (n, n) array that holds no
+    reference to buf (module docstring: the caller keeps buf alive)."""
+    return carray(_row_pointer(buf, 0), (n, n))
+
+
 @njit(cache=True, _nrt=True)  # returns views: never without NRT (kernel._step)
 def _model(flat, k):
     """m (pack): joints' indices, anchors, gains, limits, yield; bodies' mass, inertia,
@@ -235,6 +242,12 @@ def _pws(flat, k):
 def row_capacity(flat):
     """The row table's length (ws[0]: pack's worst case of rows a step can make)."""
     return flat[9][_WS, 1]
+
+
+@njit(cache=True, _nrt=True)  # returns views: never without NRT (kernel._step)
+def node_count(flat):
+    """The forest's number of nodes (tree[1], its parents: solver.fast.pack)."""
+    return flat[9][_TREE + 1, 1]
 
 
 @njit(cache=True, _nrt=True)  # returns views: never without NRT (kernel._step)

@@ -22,7 +22,8 @@ import numpy as np
 from numba import njit
 
 from solver import hybrid
-from solver.fast.post import apply_rows
+from solver.fast.flat import square
+from solver.fast.post import apply_listed, copy6
 from solver.fast.tree import (
     ALL,
     backward_pass,
@@ -34,10 +35,11 @@ from solver.fast.tree import (
     tree_factor,
     tree_substitute,
 )
-from solver.pgs import dense_pgs
+from solver.pgs import dense_pgs_into
 from solver.rows import KIND_GRIP
 
 ROUNDS = inspect.signature(hybrid.hybrid_solve).parameters["rounds"].default
+NU_CAP = 64  # iterated rows whose Schur complement fits the step's scratch (kernel.step_arrays)
 
 
 @njit(cache=True, error_model="numpy")
@@ -65,11 +67,12 @@ def _mark_path(body, parent, movable, mark, tag):
         node = parent[node]
 
 
-@njit(cache=True, error_model="numpy")
-def _schur(rw, its, nu, seq, nseq, parent, nb, size, tw, movable, x):
-    """S (nu, nu) over the rows its[:nu], column by column (module docstring)."""
-    s_mat = np.empty((nu, nu))
-    path, needed = np.zeros(len(parent), np.int64), np.zeros(len(parent), np.int64)
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _schur(rw, its, nu, seq, nseq, parent, nb, size, tw, movable, x, path, needed, s_mat):
+    """S (nu, nu) into s_mat over the rows its[:nu], column by column (module docstring);
+    path, needed: (nodes,) int scratch."""
+    path[:] = 0
+    needed[:] = 0
     for i in range(nu):
         _mark_path(rw[0][its[i]], parent, movable, needed, 1)
         _mark_path(rw[1][its[i]], parent, movable, needed, 1)
@@ -96,7 +99,6 @@ def _schur(rw, its, nu, seq, nseq, parent, nb, size, tw, movable, x):
     for i in range(nu):
         for k in range(i):
             s_mat[i, k] = s_mat[k, i] = 0.5 * (s_mat[i, k] + s_mat[k, i])
-    return s_mat
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
@@ -122,108 +124,130 @@ def _solve_exact(seq, nseq, parent, nb, movable, rows, size, tw, vel, lam, out, 
                 lam[rows[i, k]] = x[i, k]
 
 
-@njit(cache=True, error_model="numpy")
-def dormant_rows(rw, n, lam0):
-    """solver.hybrid.dormant_rows on the table's first n rows."""
-    out = np.zeros(n, dtype=np.bool_)
+@njit(cache=True, error_model="numpy", _nrt=False)
+def dormant_rows(rw, n, lam0, out):
+    """out[:n] ← solver.hybrid.dormant_rows on the table's first n rows."""
     lo, hi, bias, fric = rw[4], rw[5], rw[7], rw[8]  # (not rw[k] inside and/or: see _update_sets)
     for i in range(n):
+        out[i] = False
         if lo[i] == 0.0 and hi[i] == np.inf and fric[i] < 0:
             out[i] = lam0[i] == 0.0 and bias[i] > 0.0
     for i in range(n):
         if fric[i] >= 0:
             out[i] = out[fric[i]]
-    return out
 
 
-@njit(cache=True, error_model="numpy")
-def _iterate(rw, its, nu, s_vec, lam0, iterations):
-    """PGS on S's rows: bounds, friction (indices local to its) and warm start."""
-    lo, hi, fric, mu, start = (np.empty(nu), np.empty(nu), np.full(nu, -1, np.int64),
-                               np.empty(nu), np.empty(nu))  # fmt: skip
-    local = np.full(len(rw[0]), -1, np.int64)
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _iterate(rw, its, nu, lam0, local, lo, hi, fric, mu, start):
+    """PGS on S's rows: bounds, friction (indices local to its) and warm start into
+    lo … start [:nu]; local (≥ rows) int scratch, read only where its[:nu] wrote it."""
     for i in range(nu):
         local[its[i]] = i
     for i in range(nu):
         r = its[i]
-        lo[i], hi[i], mu[i], start[i] = rw[4][r], rw[5][r], rw[9][r], lam0[r]
-        if rw[8][r] >= 0:
-            fric[i] = local[rw[8][r]]
-    return lo, hi, fric, mu, start
+        lo[i], hi[i], mu[i], start[i], fric[i] = rw[4][r], rw[5][r], rw[9][r], lam0[r], -1
+        normal = rw[8][r]
+        if normal >= 0 and 0 <= local[normal] < nu and its[local[normal]] == normal:
+            fric[i] = local[normal]
+
+
+@njit(cache=True, error_model="numpy", _nrt=False)
+def _iterated(rw, its, nu, seq, nseq, parent, nb, size, tw, movable, lam0, iters, sv, s_mat):
+    """λ_U of the rows its[:nu] into sv's lam_u by PGS on their Schur complement (built in
+    s_mat (nu, nu)), the base velocities' s_U in sv's s_vec; (sweeps, residual)."""
+    ints, (s_vec, lo, hi, mu, start, lam_u, r_u) = sv[1], sv[2]
+    _schur(rw, its, nu, seq, nseq, parent, nb, size, tw, movable, tw[2], ints[4], ints[5], s_mat)
+    _iterate(rw, its, nu, lam0, ints[2], lo, hi, ints[3], mu, start)
+    return dense_pgs_into(nu, s_mat, s_vec, lo, hi, ints[3], mu, start, iters, 1e-12, lam_u, r_u)
+
+
+@njit(cache=True, error_model="numpy", _nrt=True)
+def _iterated_large(rw, its, nu, seq, nseq, parent, nb, size, tw, movable, lam0, iters, sv):
+    """``_iterated`` with S in a matrix made for it, for more than NU_CAP rows."""
+    s_mat = np.empty((nu, nu))
+    return _iterated(rw, its, nu, seq, nseq, parent, nb, size, tw, movable, lam0, iters, sv, s_mat)
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def _round(bw, tree, h, rw, n, lam, vel_p, its, nu, grips, lam0, iters, asleep):
-    """One solve with the current sets: (ok, v, sweeps, residual); fills λ.
+def _round(bw, tree, h, rw, lam, vel_p, its, nu, grips, lam0, iters, asleep, sv, vel):
+    """One solve with the current sets into lam and vel: (ok, sweeps, residual).
     bw: the solvers' model arrays (solver.fast.kernel.solve); grips = (free grip rows,
-    their count, the gripped body)."""
+    their count, the gripped body); sv: the solvers' scratch (kernel.step_arrays)."""
     _, parent, _, _, seq, rows, size, tw = tree
     joint_bone, mass, movable, resp_a, resp_b, _, inertia_w = bw
     nb = len(vel_p)
     free_grip, ngrip, body = grips
     nseq = forest_sequence(tree, nb, movable, free_grip, ngrip, body, asleep, joint_bone)
     init_nodes(seq, nseq, nb, rw, vel_p, h, mass, inertia_w, rows, size, tw[0], tw[2])
-    vel = np.empty_like(vel_p)
     if not tree_factor(seq, nseq, parent, nb, rw, rows, size, tw):
-        return False, vel, 0, 0.0
+        return False, 0, 0.0
     _solve_exact(seq, nseq, parent, nb, movable, rows, size, tw, vel_p, lam, vel, False)
     if nu == 0:
-        return True, vel, 0, 0.0
-    s_vec = np.empty(nu)
+        return True, 0, 0.0
+    s_vec, lam_u, pushed = sv[2][0], sv[2][5], sv[3][1]
     for i in range(nu):
         s_vec[i] = row_velocity(rw, its[i], vel) + rw[7][its[i]]
-    s_mat = _schur(rw, its, nu, seq, nseq, parent, nb, size, tw, movable, tw[2])
-    lo, hi, fric, mu, start = _iterate(rw, its, nu, s_vec, lam0, iters)
-    lam_u, sweeps, residual = dense_pgs(s_mat, s_vec, lo, hi, fric, mu, start, iters, 1e-12)
-    chosen = np.zeros(n, dtype=np.bool_)
+    if nu <= NU_CAP:
+        sweeps, residual = _iterated(rw, its, nu, seq, nseq, parent, nb, size, tw, movable,
+                                     lam0, iters, sv, square(sv[4], nu))  # fmt: skip
+    else:
+        sweeps, residual = _iterated_large(
+            rw, its, nu, seq, nseq, parent, nb, size, tw, movable, lam0, iters, sv
+        )
     for i in range(nu):
         lam[its[i]] = lam_u[i]
-        chosen[its[i]] = True
-    pushed = vel_p.copy()
-    apply_rows(rw, chosen, resp_a, resp_b, lam, pushed)
+    copy6(vel_p, pushed)
+    apply_listed(rw, its, nu, resp_a, resp_b, lam, pushed)
     init_rhs(seq, nseq, nb, rw, pushed, rows, size, tw[2])
     _solve_exact(seq, nseq, parent, nb, movable, rows, size, tw, pushed, lam, vel, True)
-    return True, vel, sweeps, residual
+    return True, sweeps, residual
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def hybrid_solve(bw, tree, h, rw, n, ne, vel_free, lam0, iterations, grip, skip, asleep):
-    """(ok, λ, v, sweeps, residual) as solver.hybrid.hybrid_solve; ok False when the
-    exact system is degenerate; bw: the solvers' model arrays (solver.fast.kernel.solve);
-    h: the step; ``skip``: leave dormant rows out of the iteration; asleep (nb,) bool:
-    sleeping bodies (their islands are not in the forest)."""
+def hybrid_solve(bw, tree, h, rw, n, ne, vel_free, lam0, iterations, grip, skip, asleep, sv,
+                 lam, vel):  # fmt: skip
+    """(ok, sweeps, residual) as solver.hybrid.hybrid_solve, λ into lam[:n] and the
+    velocities into vel; ok False when the exact system is degenerate; bw: the solvers'
+    model arrays (solver.fast.kernel.solve); h: the step; ``skip``: leave dormant rows
+    out of the iteration; asleep (nb,) bool: sleeping bodies (their islands are not in
+    the forest); sv: the solvers' scratch (kernel.step_arrays: nothing is allocated
+    unless more than NU_CAP rows are iterated)."""
     grip0, ngrip, body = grip
     resp_a, resp_b = bw[3], bw[4]
-    dormant = dormant_rows(rw, n, lam0) if skip else np.zeros(n, dtype=np.bool_)
-    at_lo, at_hi = np.zeros(n, dtype=np.bool_), np.zeros(n, dtype=np.bool_)
-    its, free_grip = np.empty(n, np.int64), np.empty(6, np.int64)
-    lam = np.zeros(n)
+    (at_lo, at_hi, dormant), (its, pinned, _, _, _, _, free_grip) = sv[0], sv[1]
+    vel_p = sv[3][0]
+    if skip:
+        dormant_rows(rw, n, lam0, dormant)
+    for i in range(n):
+        at_lo[i], at_hi[i], lam[i] = False, False, 0.0
+        if not skip:
+            dormant[i] = False
     lo, hi, kind = rw[4], rw[5], rw[11]
-    vel, sweeps, residual = vel_free, 0, 0.0  # (replaced by the first round's)
+    sweeps, residual = 0, 0.0
     for _ in range(ROUNDS):
-        nu, nfree, pinned = 0, 0, False
+        nu, nfree, npin = 0, 0, 0
         for i in range(ne, n):
             lam[i] = lo[i] if at_lo[i] else hi[i] if at_hi[i] else 0.0
-            pinned = pinned or at_lo[i] or at_hi[i]
+            if at_lo[i] or at_hi[i]:
+                pinned[npin], npin = i, npin + 1
             if kind[i] == KIND_GRIP:
                 if not (at_lo[i] or at_hi[i]):
                     free_grip[nfree], nfree = i, nfree + 1
             elif not dormant[i]:
                 its[nu], nu = i, nu + 1
-        vel_p = vel_free.copy()
-        if pinned:  # (none in most rounds: nothing to add)
-            apply_rows(rw, at_lo | at_hi, resp_a, resp_b, lam, vel_p)
-        ok, vel, sweeps, residual = _round(
-            bw, tree, h, rw, n, lam, vel_p, its, nu, (free_grip, nfree, body), lam0,
-            iterations, asleep,
+        copy6(vel_free, vel_p)
+        apply_listed(rw, pinned, npin, resp_a, resp_b, lam, vel_p)  # (most rounds: none)
+        ok, sweeps, residual = _round(
+            bw, tree, h, rw, lam, vel_p, its, nu, (free_grip, nfree, body), lam0, iterations,
+            asleep, sv, vel,
         )  # fmt: skip
         if not ok:
-            return False, lam, vel, 0, 0.0
+            return False, 0, 0.0
         if not _update_sets(rw, ne, n, lam, vel, grip0, ngrip, dormant, at_lo, at_hi):
-            return True, lam, vel, sweeps, residual
+            return True, sweeps, residual
     for i in range(n):
         lam[i] = min(max(lam[i], lo[i]), hi[i])
-    return True, lam, vel, sweeps, residual
+    return True, sweeps, residual
 
 
 @njit(cache=True, error_model="numpy")

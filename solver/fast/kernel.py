@@ -33,12 +33,13 @@ from solver.fast.contacts import (
     is_touch_row,
     world_shapes,
 )
-from solver.fast.flat import row_capacity, unflatten
-from solver.fast.hybrid import hybrid_solve
+from solver.fast.flat import node_count, row_capacity, unflatten
+from solver.fast.hybrid import NU_CAP, hybrid_solve
 from solver.fast.kin import frames, matvec
 from solver.fast.post import (
     apply,
-    apply_rows,
+    apply_listed,
+    copy6,
     gaps_within,
     integrate,
     needs_projection,
@@ -58,7 +59,7 @@ from solver.fast.rows import (
     rheology_rows,
 )
 from solver.fast.tree import forest_sequence, row_velocity, tree_solve
-from solver.pgs import pgs_solve
+from solver.pgs import pgs_into
 from solver.rows import KIND_GRIP, KIND_RHEOLOGY
 from solver.sleep import settle, touch
 from solver.substep import substeps_needed
@@ -219,54 +220,56 @@ def _tree_pass(bw, tree, h, rw, vel_free, free_grip, ngrip, body, asleep, lam):
     return tree_solve(seq, nseq, parent, nb, rw, vel_free, h, mass, inertia_w, rows, size, tw, lam)
 
 
-@njit(cache=True, error_model="numpy")
-def direct(bw, tree, h, rw, n, vel_free, grip, asleep):
-    """(code, λ, v, residual) as solver.direct.direct_solve: a primal active set on the
-    box-QP.  Rows pinned at a bound (at_lo/at_hi) have their force folded into v_free and
-    the free rows are solved by the tree; a pinned row is released when its residual
-    r = J v + C λ + β no longer pushes against the bound (r > 0 at hi, r < 0 at lo), a
-    free row whose force leaves its box is pinned; ≤ DIRECT_ROUNDS rounds.
+@njit(cache=True, error_model="numpy", _nrt=False)
+def direct(bw, tree, h, rw, n, vel_free, grip, asleep, sv, lam, vel):
+    """(code, residual) as solver.direct.direct_solve, λ into lam[:n] and the velocities
+    into vel: a primal active set on the box-QP.  Rows pinned at a bound (at_lo/at_hi)
+    have their force folded into v_free and the free rows are solved by the tree; a
+    pinned row is released when its residual r = J v + C λ + β no longer pushes against
+    the bound (r > 0 at hi, r < 0 at lo), a free row whose force leaves its box is
+    pinned; ≤ DIRECT_ROUNDS rounds.  sv: the solvers' scratch (step_arrays).
     code 0: settled; 1: not settled (λ clipped, PGS finishes); 2: degenerate (fall back)."""
     grip0, ngrip, body = grip
     resp_a, resp_b = bw[3], bw[4]
     lo, hi = rw[4], rw[5]
-    at_lo, at_hi = np.zeros(n, dtype=np.bool_), np.zeros(n, dtype=np.bool_)
-    free_grip = np.empty(6, dtype=np.int64)
-    lam, r = np.zeros(n), np.zeros(n)
-    vel = vel_free.copy()
+    (at_lo, at_hi, _), (_, pinned, _, _, _, _, free_grip) = sv[0], sv[1]
+    vel_p = sv[3][0]
+    for i in range(n):
+        at_lo[i], at_hi[i], lam[i] = False, False, 0.0
     for _ in range(DIRECT_ROUNDS):
-        nfree = 0
+        nfree, npin = 0, 0
         for i in range(grip0, grip0 + ngrip):
             if at_lo[i] or at_hi[i]:
                 lam[i] = lo[i] if at_lo[i] else hi[i]
+                pinned[npin], npin = i, npin + 1
             else:
                 free_grip[nfree], nfree = i, nfree + 1
-        vel = vel_free.copy()
-        apply_rows(rw, at_lo | at_hi, resp_a, resp_b, lam, vel)
-        if not _tree_pass(bw, tree, h, rw, vel, free_grip, nfree, body, asleep, lam):
-            return 2, lam, vel, 0.0
-        vel = vel_free.copy()
+        copy6(vel_free, vel_p)
+        apply_listed(rw, pinned, npin, resp_a, resp_b, lam, vel_p)
+        if not _tree_pass(bw, tree, h, rw, vel_p, free_grip, nfree, body, asleep, lam):
+            return 2, 0.0
+        copy6(vel_free, vel)
         apply(rw, n, resp_a, resp_b, lam, vel)
         changed, residual = False, 0.0
         for i in range(n):
-            r[i] = row_velocity(rw, i, vel) + rw[6][i] * lam[i] + rw[7][i]
-            if (at_hi[i] and r[i] > 0.0) or (at_lo[i] and r[i] < 0.0):
+            r = row_velocity(rw, i, vel) + rw[6][i] * lam[i] + rw[7][i]
+            if (at_hi[i] and r > 0.0) or (at_lo[i] and r < 0.0):
                 at_lo[i], at_hi[i], changed = False, False, True
             elif not (at_lo[i] or at_hi[i]):
-                residual = max(residual, abs(r[i]))
+                residual = max(residual, abs(r))
                 if lam[i] < lo[i] or lam[i] > hi[i]:
                     if not grip0 <= i < grip0 + ngrip:
-                        return 2, lam, vel, 0.0
+                        return 2, 0.0
                     at_lo[i], at_hi[i], changed = lam[i] < lo[i], lam[i] > hi[i], True
         if not changed:
-            return 0, lam, vel, residual
+            return 0, residual
     for i in range(n):
         lam[i] = min(max(lam[i], lo[i]), hi[i])
-    return 1, lam, vel, 0.0
+    return 1, 0.0
 
 
 @njit(cache=True, error_model="numpy", inline="always")
-def solve(bw, tree, rw, opt, iopt, warm, n, vel_free, grip, asleep, lam0, lam, vel):
+def solve(bw, tree, rw, opt, iopt, warm, n, vel_free, grip, asleep, sv, lam0, lam, vel):
     """(status, iterations, residual, solver) as solver.step.solve; λ into lam[:n], the
     velocities into vel.  The row responses (bw[3], bw[4]) are made here, for the rows
     the solver reads: all of them for the direct and PGS solves, only the bounded ones
@@ -276,8 +279,7 @@ def solve(bw, tree, rw, opt, iopt, warm, n, vel_free, grip, asleep, lam0, lam, v
     bw: the model arrays the solvers read (joint_bone, mass, inverse mass, row responses
     a and b, world inverse inertia, world inertia: m[1], m[15], m[16], ws[1], ws[2],
     ws[6], ws[7]); warm: the last step's (keys, λ); lam0 (≥ n): the warm start, made
-    here.  The solvers allocate, so each runs in a function of its own with reference
-    counting (``_direct_into``, ``_hybrid_into``, ``_pgs_into``)."""
+    here; sv: the solvers' scratch arrays (step_arrays), so none of them allocates."""
     lo, hi, fric, kind = rw[4], rw[5], rw[8], rw[11]
     bilateral = True
     for i in range(n):
@@ -293,7 +295,7 @@ def solve(bw, tree, rw, opt, iopt, warm, n, vel_free, grip, asleep, lam0, lam, v
     if method == METHOD_DIRECT or (method == METHOD_AUTO and bilateral):
         if not bilateral:
             return FALLBACK, 0, 0.0, SOLVER_DIRECT
-        code, residual = _direct_into(bw, tree, opt[0], rw, n, vel_free, grip, asleep, lam, vel)
+        code, residual = direct(bw, tree, opt[0], rw, n, vel_free, grip, asleep, sv, lam, vel)
         if code == 2:
             return FALLBACK, 0, 0.0, SOLVER_DIRECT
         if code == 0:
@@ -301,52 +303,16 @@ def solve(bw, tree, rw, opt, iopt, warm, n, vel_free, grip, asleep, lam0, lam, v
         for i in range(n):
             lam0[i] = lam[i]
     if hybrid:
-        ok, sweeps, residual = _hybrid_into(
-            bw, tree, opt[0], rw, n, ne, vel_free, lam0, iopt[1], grip, iopt[9], asleep, lam, vel
-        )
+        ok, sweeps, residual = hybrid_solve(
+            bw, tree, opt[0], rw, n, ne, vel_free, lam0, iopt[1], grip, iopt[9], asleep, sv, lam,
+            vel,
+        )  # fmt: skip
         return (OK if ok else FALLBACK), sweeps, residual, SOLVER_HYBRID
-    sweeps, residual = _pgs_into(bw, rw, n, vel_free, lam0, iopt[1], lam, vel)
-    return OK, sweeps, residual, SOLVER_PGS
-
-
-@njit(cache=True, error_model="numpy", _nrt=True)
-def _direct_into(bw, tree, h, rw, n, vel_free, grip, asleep, lam_out, vel_out):
-    """``direct`` with its λ and velocities copied into lam_out[:n] and vel_out; (code,
-    residual)."""
-    code, lam, vel, residual = direct(bw, tree, h, rw, n, vel_free, grip, asleep)
-    _copy_out(lam, vel, n, lam_out, vel_out)
-    return code, residual
-
-
-@njit(cache=True, error_model="numpy", _nrt=True)
-def _hybrid_into(bw, tree, h, rw, n, ne, vel_free, lam0, iterations, grip, skip, asleep,
-                 lam_out, vel_out):  # fmt: skip
-    """``hybrid_solve`` with its λ and velocities copied out; (ok, sweeps, residual)."""
-    ok, lam, vel, sweeps, residual = hybrid_solve(
-        bw, tree, h, rw, n, ne, vel_free, lam0, iterations, grip, skip, asleep
-    )
-    _copy_out(lam, vel, n, lam_out, vel_out)
-    return ok, sweeps, residual
-
-
-@njit(cache=True, error_model="numpy", _nrt=True)
-def _pgs_into(bw, rw, n, vel_free, lam0, iterations, lam_out, vel_out):
-    """``pgs_solve`` on the first n rows with its λ and velocities copied out; (sweeps,
-    residual)."""
-    lam, vel, sweeps, residual = pgs_solve(
-        rw[0][:n], rw[1][:n], rw[2][:n], rw[3][:n], bw[3][:n], bw[4][:n], rw[4][:n],
-        rw[5][:n], rw[6][:n], rw[7][:n], rw[8][:n], rw[9][:n], vel_free, lam0[:n],
-        iterations, 1e-12,
+    sweeps, residual = pgs_into(
+        n, rw[0], rw[1], rw[2], rw[3], bw[3], bw[4], rw[4], rw[5], rw[6], rw[7], rw[8], rw[9],
+        vel_free, lam0, iopt[1], 1e-12, lam, vel, sv[2][0],
     )  # fmt: skip
-    _copy_out(lam, vel, n, lam_out, vel_out)
-    return sweeps, residual
-
-
-@njit(cache=True, error_model="numpy")
-def _copy_out(lam, vel, n, lam_out, vel_out):
-    for i in range(n):
-        lam_out[i] = lam[i]
-    vel_out[:, :] = vel
+    return OK, sweeps, residual, SOLVER_PGS
 
 
 @njit(cache=True, error_model="numpy", _nrt=False)
@@ -378,8 +344,10 @@ def step_kernel(flat, st, inp, out, rep_i, rep_f):
     the inlined parts, and every array of a tuple handed to one, cost two calls to NRT's
     counters (~4,400 a step on the doll, ~11 % of its time), although the model's views
     have no owner to count.  Whatever allocates runs in functions of its own that keep
-    the counting (the solvers: ``solve``; the projection, the substep test, sleeping)."""
-    scratch, keys, values = step_arrays(len(st[0]), len(st[4]), row_capacity(flat))
+    the counting (the projection, the substep test, sleeping, a Schur complement of more
+    than hybrid.NU_CAP rows); the solvers work in the step's scratch arrays."""
+    nodes = node_count(flat)
+    scratch, keys, values = step_arrays(len(st[0]), len(st[4]), row_capacity(flat), nodes)
     status, count = _step(flat, st, inp, out, rep_i, rep_f, scratch, keys, values)
     if status != OK:
         return _handed_back(status, out, rep_i, rep_f)
@@ -387,16 +355,26 @@ def step_kernel(flat, st, inp, out, rep_i, rep_f):
 
 
 @njit(cache=True, error_model="numpy")
-def step_arrays(nb, nj, rows):
-    """The arrays ``_step`` works in, for nb bodies, nj joints and room for ``rows`` rows:
-    (scratch, warm keys, warm λ), scratch as ``_step`` reads it.  step_kernel makes them
-    every step; a Sim once, kept in its flat buffers (entry.SIM_SCHEMA)."""
-    b = np.bool_
+def step_arrays(nb, nj, rows, nodes):
+    """The arrays ``_step`` works in, for nb bodies, nj joints, room for ``rows`` rows and
+    a forest of ``nodes`` nodes: (scratch, warm keys, warm λ), scratch as ``_step`` reads
+    it.  step_kernel makes them every step; a Sim once, kept in its flat buffers
+    (entry.SIM_SCHEMA)."""
+    b, i = np.bool_, np.int64
+    solvers = (
+        (np.empty(rows, b), np.empty(rows, b), np.empty(rows, b)),
+        (np.empty(rows, i), np.empty(rows, i), np.empty(rows, i), np.empty(rows, i),
+         np.empty(nodes, i), np.empty(nodes, i), np.empty(6, i)),
+        (np.empty(rows), np.empty(rows), np.empty(rows), np.empty(rows), np.empty(rows),
+         np.empty(rows), np.empty(rows)),
+        (np.empty((nb, 6)), np.empty((nb, 6))),
+        np.empty(NU_CAP * NU_CAP),
+    )  # fmt: skip
     scratch = (
         np.empty((nb, 6)), np.empty(nb, b), np.empty(nb, b), (np.empty(nb, b), np.empty(4)),
         np.empty(rows), np.empty(rows), np.empty((nb, 6)),
         (np.empty((nb, 3)), np.empty((nb, 3)), np.empty(nb, b)),
-        np.empty((nj, 3)), (np.empty((nj, 3)), np.empty((nj, 3))), np.empty(nj, b),
+        np.empty((nj, 3)), (np.empty((nj, 3)), np.empty((nj, 3))), np.empty(nj, b), solvers,
     )  # fmt: skip
     return scratch, np.empty(rows, np.int64), np.empty(rows)
 
@@ -408,12 +386,12 @@ def _step(flat, st, inp, out, rep_i, rep_f, scratch, keys, values):
     that take those tuples are inlined into it (``inline="always"``) or called, compiled
     without reference counting too.  scratch: v_free (nb,6), fresh and awake (nb,) bool,
     wake's (loaded, pointer), warm λ and λ (rows), v (nb,6), integrate's, rheology's w
-    (nj,3), limit_rows' (gaps, turned), flowing joints (nj,) bool: whatever they hold on
-    entry (a Sim passes the same arrays every step: ``step_arrays``) is overwritten
-    before it is read."""
+    (nj,3), limit_rows' (gaps, turned), flowing joints (nj,) bool, the solvers' (``solve``):
+    whatever they hold on entry (a Sim passes the same arrays every step:
+    ``step_arrays``) is overwritten before it is read."""
     m, g, tree, ptree, ws, pws, opt, iopt = unflatten(flat)
     vel_free, fresh, awake, wake_scratch, lam0, lam, vel = scratch[:7]
-    integrate_scratch, w, limit_scratch, flows = scratch[7:]
+    integrate_scratch, w, limit_scratch, flows, sv = scratch[7:]
     pos, quat = st[0], st[1]
     nb = len(pos)
     rw, rot, inv_i, inertia_w = ws[0], ws[5], ws[6], ws[7]
@@ -457,7 +435,7 @@ def _step(flat, st, inp, out, rep_i, rep_f, scratch, keys, values):
     grip = (grip0, ngrip, inp[4][1])
     bw = (m[1], m[15], m[16], ws[1], ws[2], inv_i, inertia_w)
     status, iters, residual, used = solve(
-        bw, tree, rw, opt, iopt, (st[8], st[9]), n, vel_free, grip, asleep, lam0, lam, vel
+        bw, tree, rw, opt, iopt, (st[8], st[9]), n, vel_free, grip, asleep, sv, lam0, lam, vel
     )
     t = tick(prof, on, 5, t)
     if status or not state_ok(joints, opt, pos, quat, vel[:, :3], vel[:, 3:], False):

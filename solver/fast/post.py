@@ -205,13 +205,23 @@ def apply(rw, n, resp_a, resp_b, lam, vel):
     _apply_side(rw[1], n, resp_b, lam, vel)
 
 
-@njit(cache=True, error_model="numpy")
-def apply_rows(rw, chosen, resp_a, resp_b, lam, vel):
-    """vel += response to λ of the chosen rows only (same order as ``apply``)."""
+@njit(cache=True, error_model="numpy", inline="always")
+def copy6(src, dst):
+    """dst[:, :] ← src (nb, 6) (an array assigned to a slice needs reference counting)."""
+    for b in range(len(src)):
+        for k in range(6):
+            dst[b, k] = src[b, k]
+
+
+@njit(cache=True, error_model="numpy", _nrt=False)
+def apply_listed(rw, rows, count, resp_a, resp_b, lam, vel):
+    """vel += response to λ of the rows rows[:count] only (ascending: the order of
+    ``apply``)."""
     for side in range(2):
         body, resp = (rw[0], resp_a) if side == 0 else (rw[1], resp_b)
-        for i in range(len(chosen)):
-            if chosen[i] and body[i] >= 0:
+        for q in range(count):
+            i = rows[q]
+            if body[i] >= 0:
                 for k in range(6):
                     vel[body[i], k] += resp[i, k] * lam[i]
 

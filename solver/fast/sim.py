@@ -58,7 +58,7 @@ class Sim:
         sets = tuple(tuple(np.zeros_like(_field(rest, f, nb)) for f in _FIELDS) for _ in range(2))
         warm = (np.zeros(rows, np.int64), np.zeros(rows), np.zeros(1, np.int64))
         packed = (fm.m, fm.g, fm.tree, fm.ptree, fm.ws, fm.pws, fm.opt, fm.iopt)
-        scratch = step_arrays(nb, len(fm.m[0]), rows)
+        scratch = step_arrays(nb, len(fm.m[0]), rows, len(fm.tree[1]))
         parts = (*packed, *sets, warm, np.zeros(4, np.int64), np.zeros(10), scratch)
         self._flat, views = flatten(parts, SIM_SCHEMA)
         self._sets, self._warm, self._rep_i, self._rep_f = views[8:10], *views[10:13]

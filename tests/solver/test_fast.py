@@ -19,10 +19,11 @@ from paper_experiment import DD, DF, INERTIA, KF, T_END, T_LOAD, TAU, recursion
 from rigbuild import chain, one_bone, rheology
 
 from puppetcli.rigfile import load_rig
-from solver import quat
+from solver import hybrid, quat
 from solver.errors import SimulationError
 from solver.fast import fast_step, supports
 from solver.fast.bench import scene_inputs
+from solver.fast.hybrid import NU_CAP
 from solver.grip import Pointer, make_coupling
 from solver.model import build_model
 from solver.observe import bone_points, joint_gaps, joint_rotations
@@ -187,6 +188,30 @@ def test_doll_with_contacts_push_grip_and_touch_matches(method):
     assert min(r.contacts for r in reports) > 0
     assert max(np.abs(r.grip_force).max() for r in reports[:250]) > 1.0
     assert max(np.abs(r.touch_force).max() for r in reports[250:]) > 1.0
+
+
+def lying_chain(links: int = 30, iterations: int = 100):
+    """A free chain of balls lying on the ground: a resting contact each."""
+    spec = chain(links, 0.001, root_mode="free", ground=0.98, collide=True, shape="sphere")
+    return build_model(spec).with_options(iterations=iterations)
+
+
+def test_more_iterated_rows_than_the_scratch_holds_matches(monkeypatch):
+    # 30 contacts: 90 rows in the hybrid's Schur complement, more than the step's scratch
+    # holds (solver.fast.hybrid.NU_CAP), so the compiled solve makes a matrix of its own.
+    # 100 sweeps converge, so the two implementations agree to rounding.
+    sizes = []  # rows the numpy hybrid iterates, step by step
+    dense_pgs = hybrid.dense_pgs
+
+    def counted(q, c, *args):
+        sizes.append(len(c))
+        return dense_pgs(q, c, *args)
+
+    monkeypatch.setattr(hybrid, "dense_pgs", counted)
+    model = lying_chain()
+    reports = lockstep(model, initial_state(model), [None] * 40)
+    assert {r.solver for r in reports} == {"hybrid"}
+    assert min(sizes) > NU_CAP and len(sizes) == 40
 
 
 def test_substepped_rope_matches():

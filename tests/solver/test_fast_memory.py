@@ -2,12 +2,14 @@
 
 Most of the step runs without numba's reference counting (solver.fast.kernel._step,
 ``_nrt=False``), between functions that keep it (the allocation of the step's arrays,
-the solvers, the projection, the substep test, sleeping): an array handed the wrong way
+the projection, the substep test, sleeping, a Schur complement too large for the
+step's scratch): an array handed the wrong way
 across that boundary would leak, or be freed while still in use.  numba's runtime
 counts its own allocations and frees (its NRT statistics); over each run below, both
 must grow by the same amount, through ``Sim`` (in place) and ``fast_step`` (fresh
 states, dropped afterwards).  The runs cover the hybrid, PGS and direct solves, the grip,
-a touching pointer, sleeping, the joint projection and steps handed back to numpy."""
+a touching pointer, sleeping, the joint projection, a chain lying on the ground (more
+iterated rows than the scratch holds) and steps handed back to numpy."""
 
 from __future__ import annotations
 
@@ -19,7 +21,7 @@ import numpy as np
 import pytest
 from numba.core.runtime import _nrt_python, rtsys
 from rigbuild import chain
-from test_fast import box_chain, doll_inputs
+from test_fast import box_chain, doll_inputs, lying_chain
 
 from puppetcli.rigfile import load_rig
 from solver.fast import fast_step
@@ -52,6 +54,11 @@ def _boxes():
     return model, initial_state(model), [None] * 20
 
 
+def _lying_chain():
+    model = lying_chain()
+    return model, initial_state(model), [None] * 10
+
+
 SCENES = {
     "doll-auto": lambda: _doll("auto", 200),
     "doll-pgs": lambda: _doll("pgs", 100),
@@ -59,6 +66,7 @@ SCENES = {
     "chain-direct-projection": _tumbling_chain,
     "rope-substeps": _rope,
     "boxes-handed-back": _boxes,
+    "schur-beyond-scratch": _lying_chain,
 }
 
 
