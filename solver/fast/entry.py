@@ -60,7 +60,7 @@ set of buffers holds them all, so a step unboxes ten arrays for all of them and
 allocates none."""
 
 
-@njit(cache=True, _nrt=True)  # returns views: never without NRT (kernel._step)
+@njit(cache=True, inline="always")  # views made in the caller (solver.fast.flat)
 def _scratch(flat, k):
     """The scratch arrays whose first leaf is k of a Sim's flat buffers: (the step's
     scratch tuple, warm keys, warm λ)."""
@@ -75,7 +75,7 @@ def _scratch(flat, k):
     return scratch, leaf(i, lay, k + 35), leaf(f, lay, k + 36)
 
 
-@njit(cache=True, _nrt=True)  # returns views: never without NRT (kernel._step)
+@njit(cache=True, inline="always")  # views made in the caller (solver.fast.flat)
 def _solvers(flat, k):
     """The solvers' scratch arrays (kernel.step_arrays) whose first leaf is k."""
     f, f6, i, b, lay = flat[0], flat[3], flat[6], flat[8], flat[9]
@@ -90,7 +90,7 @@ def _solvers(flat, k):
     )  # fmt: skip
 
 
-@njit(cache=True, _nrt=True)  # returns views: never without NRT (kernel._step)
+@njit(cache=True, inline="always")  # views made in the caller (solver.fast.flat)
 def _state_set(flat, k):
     """The state set whose first leaf is k of a Sim's flat buffers."""
     f, f3, f4, b, lay = flat[0], flat[1], flat[2], flat[8], flat[9]

@@ -17,7 +17,11 @@ depth-first order of SCHEMA.  The compiled views are ``numba.carray``s over the 
 memory that hold no reference to it: a slice would, and its reference counting across
 the rebuild's calls costs ~45 ns a view (5 µs a step); without it a view costs a few ns.
 So the caller keeps the buffers alive for the call (Python holds ``fm.flat``), and no
-compiled function may return one of these views to Python.  An array that appears twice
+compiled function may return one of these views to Python.  ``unflatten`` and the functions that
+build its parts are inlined into their caller (``inline="always"``): made in a function
+of their own, the hundred views were returned as one tuple, a few kilobytes of array
+structs copied out of it on every step (the one-joint creep step at 1 ms: 7.0 → 3.5 µs
+a kernel call; docs/performance.md).  An array that appears twice
 (ptree's arrays are tree's) is stored once and both rows point at it.  ``unflatten`` is
 written out by hand for SCHEMA (numba can neither loop over a heterogeneous tuple nor
 cache generated code); ``flatten`` checks the arrays it is given against SCHEMA, so the
@@ -142,7 +146,7 @@ def square(buf, n):
     return carray(_row_pointer(buf, 0), (n, n))
 
 
-@njit(cache=True, _nrt=True)  # returns views: never without NRT (kernel._step)
+@njit(cache=True, inline="always")  # views made in the caller (module docstring)
 def _model(flat, k):
     """m (pack): joints' indices, anchors, gains, limits, yield; bodies' mass, inertia,
     island; joints' tension levers and limit thresholds."""
@@ -157,7 +161,7 @@ def _model(flat, k):
     )  # fmt: skip
 
 
-@njit(cache=True, _nrt=True)  # returns views: never without NRT (kernel._step)
+@njit(cache=True, inline="always")  # views made in the caller (module docstring)
 def _geometry(flat, k):
     """g (pack): shapes, then candidate pairs, then the pointer-touchable shapes."""
     f, f3, f4, _, _, _, i, _, _, lay = flat
@@ -169,14 +173,14 @@ def _geometry(flat, k):
     )  # fmt: skip
 
 
-@njit(cache=True, _nrt=True)  # returns views: never without NRT (kernel._step)
+@njit(cache=True, inline="always")  # views made in the caller (module docstring)
 def _tree_ws(flat, k):
     """The elimination's block workspace (D, Y, w, g)."""
     f6, f66, lay = flat[3], flat[5], flat[9]
     return leaf(f66, lay, k), leaf(f66, lay, k + 1), leaf(f6, lay, k + 2), leaf(f6, lay, k + 3)
 
 
-@njit(cache=True, _nrt=True)  # returns views: never without NRT (kernel._step)
+@njit(cache=True, inline="always")  # views made in the caller (module docstring)
 def _tree(flat, k):
     """tree (pack._forest): order, parents, rheology rows, sequence, node rows, workspace."""
     i, i6, lay = flat[6], flat[7], flat[9]
@@ -186,7 +190,7 @@ def _tree(flat, k):
     )  # fmt: skip
 
 
-@njit(cache=True, _nrt=True)  # returns views: never without NRT (kernel._step)
+@njit(cache=True, inline="always")  # views made in the caller (module docstring)
 def _ptree(flat, k):
     """ptree (pack._forest): the projection's forest (tree's arrays, no rheology rows)."""
     i, i6, lay = flat[6], flat[7], flat[9]
@@ -196,7 +200,7 @@ def _ptree(flat, k):
     )  # fmt: skip
 
 
-@njit(cache=True, _nrt=True)  # returns views: never without NRT (kernel._step)
+@njit(cache=True, inline="always")  # views made in the caller (module docstring)
 def _rows(flat, k):
     """A row table (pack._rows, solver.fast.rows.set_row), leaves k … k + 11."""
     f, f6, i, lay = flat[0], flat[3], flat[6], flat[9]
@@ -207,7 +211,7 @@ def _rows(flat, k):
     )  # fmt: skip
 
 
-@njit(cache=True, _nrt=True)  # returns views: never without NRT (kernel._step)
+@njit(cache=True, inline="always")  # views made in the caller (module docstring)
 def _contacts(flat, k):
     """Contact buffers (pack._contacts): body_a, body_b, point, normal, depth, friction, key."""
     f, f3, i, lay = flat[0], flat[1], flat[6], flat[9]
@@ -217,7 +221,7 @@ def _contacts(flat, k):
     )  # fmt: skip
 
 
-@njit(cache=True, _nrt=True)  # returns views: never without NRT (kernel._step)
+@njit(cache=True, inline="always")  # views made in the caller (module docstring)
 def _ws(flat, k):
     """ws (pack): rows, responses, rheology joints, contacts, frames, shapes, profile."""
     f3, f6, f33, i, lay = flat[1], flat[3], flat[4], flat[6], flat[9]
@@ -228,7 +232,7 @@ def _ws(flat, k):
     )  # fmt: skip
 
 
-@njit(cache=True, _nrt=True)  # returns views: never without NRT (kernel._step)
+@njit(cache=True, inline="always")  # views made in the caller (module docstring)
 def _pws(flat, k):
     """pws (pack): the projection's rows, responses, frames and λ."""
     f, f6, f33, lay = flat[0], flat[3], flat[4], flat[9]
@@ -250,7 +254,7 @@ def node_count(flat):
     return flat[9][_TREE + 1, 1]
 
 
-@njit(cache=True, _nrt=True)  # returns views: never without NRT (kernel._step)
+@njit(cache=True, inline="always")  # views made in the caller (module docstring)
 def unflatten(flat):
     """(m, g, tree, ptree, ws, pws, opt, iopt) as views of ``flat``'s buffers."""
     return (
