@@ -11,12 +11,15 @@ sweeps; each at h = 1, 5, 20 ms.  The baseline is the paper's setting ``pgs15-ws
 Every run uses the compiled step in place (solver.fast.sim.Sim: fast_step's kernel and
 states, bit for bit, without its per-step Python; ``precision_scenes.run_scene``).
 Time is the wall time of the steps (time.perf_counter; reading a sample's state is not
-timed, as in the MuJoCo rows), best of ``repeats`` runs, after an untimed warm-up run
-that compiles the kernels for the configuration.  Times are only comparable within
-one run of the study (DESIGN.md: speed is measured as ratios): ``time_ratio`` is a
-row's seconds ÷ the baseline's at the same scene and h in the same run.  A setting that
-cannot run a scene (direct with contacts) is a row with ``note`` "n/a …"; one whose
-run breaks down has error nan and note "unstable …".
+timed, as in the MuJoCo rows), the best of several runs after an untimed warm-up run
+that compiles the kernels for the configuration: as many runs as make a steady timing
+(``puppetcli.bench.repeats_for``, the rule of ``bench``'s table: at least 5 runs and
+3,000 timed steps, so a 75-step doll run at 20 ms is timed 40 times), the same rule for
+the MuJoCo rows; ``--quick`` times one run (a study given ``repeats`` times that many).
+Times are only comparable within one run of the study (DESIGN.md: speed is measured as
+ratios): ``time_ratio`` is a row's seconds ÷ the baseline's at the same scene and h in
+the same run.  A setting that cannot run a scene (direct with contacts) is a row with
+``note`` "n/a …"; one whose run breaks down has error nan and note "unstable …".
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ from pathlib import Path
 import numpy as np
 
 from puppetcli import precision_scenes as ps
+from puppetcli.bench import repeats_for
 from puppetcli.outputs import atomic_path, write_text_atomic
 from puppetcli.precision_scenes import KINDS
 from solver.errors import SimulationError
@@ -85,8 +89,10 @@ class PrecisionRow:
 
     steps: steps simulated up to the error's sample; seconds: their wall time (best
     run); steps_per_s, realtime (simulated s ÷ wall s); error (unit); time_ratio:
-    seconds ÷ the baseline's at the same scene and h; ref_error: the reference's own
-    error estimate; substeps: mean substeps per step; note: n/a, unstable, …"""
+    seconds ÷ the baseline's at the same scene and h (an equal-time run's: at h =
+    beside); ref_error: the reference's own error estimate; substeps: mean substeps per
+    step; note: n/a, unstable, …; beside: an equal-time run's baseline step, the h of the
+    baseline row it was timed beside (``equal_time_rows``), nan for the other rows."""
 
     scene: str
     setting: str
@@ -101,6 +107,7 @@ class PrecisionRow:
     ref_error: float = 0.0
     substeps: float = 1.0
     note: str = ""
+    beside: float = NAN
 
 
 def configure(model: Model, setting: Setting, h: float) -> Model:
@@ -113,38 +120,63 @@ def configure(model: Model, setting: Setting, h: float) -> Model:
     )
 
 
-def _timed(sc: ps.Scene, repeats: int) -> tuple[list, np.ndarray, float]:
-    """States at the marks, the best wall seconds to each mark, mean substeps."""
-    ps.run_scene(replace(sc, inputs=sc.inputs[:10], marks=[]))  # compiles, fills caches
-    best = np.full(len(sc.marks), math.inf)
-    for _ in range(repeats):
-        states, walls, substeps = ps.run_scene(sc)
-        best = np.minimum(best, walls)
-    return states, best, substeps
+def _timed(scenes: list[ps.Scene], repeats: int | None) -> list[tuple]:
+    """For each scene: (states at the marks, the best wall seconds to each mark, mean
+    substeps); ``repeats`` runs, or (None) as many as make a steady timing (module
+    docstring), the scenes' runs interleaved round by round (a drifting machine slows
+    them alike)."""
+    for sc in scenes:
+        ps.run_scene(replace(sc, inputs=sc.inputs[:10], marks=[]))  # compiles, fills caches
+    runs = max(repeats or repeats_for(len(sc.inputs), "sim") for sc in scenes)
+    best = [np.full(len(sc.marks), math.inf) for sc in scenes]
+    last: list = [None] * len(scenes)
+    for _ in range(runs):
+        for k, sc in enumerate(scenes):
+            states, walls, substeps = ps.run_scene(sc)
+            best[k], last[k] = np.minimum(best[k], walls), (states, substeps)
+    return [(states, b, substeps) for (states, substeps), b in zip(last, best, strict=True)]
 
 
-def scene_rows(
-    kind: str, setting: Setting, h: float, repeats: int, reference_h: dict[str, float]
-) -> list[PrecisionRow]:
-    """The rows of one scene kind for one setting at step h."""
+def _scene(kind: str, setting: Setting, h: float) -> tuple[ps.Scene, str]:
+    """The scene for setting at h, and why it cannot run ("" when it can)."""
     model = configure(ps.base_model(kind), setting, h)
     sc = ps.scene(kind, model)
     if setting.method == "direct" and (model.has_collision or model.has_limits):
-        return [_empty(name, sc, setting, h, "n/a: direct needs two-sided rows only")
-                for name, _ in sc.rows]  # fmt: skip
-    ref, ref_errors = ps.reference(kind, h, reference_h.get(kind, 0.0))
+        return sc, "n/a: direct needs two-sided rows only"
+    return sc, ""
+
+
+def scene_rows(
+    kind: str, setting: Setting, h: float, repeats: int | None, reference_h: dict[str, float]
+) -> list[PrecisionRow]:
+    """The rows of one scene kind for one setting at step h."""
+    sc, why = _scene(kind, setting, h)
+    if why:
+        return [_empty(name, sc, setting, h, why) for name, _ in sc.rows]
     try:
-        states, walls, substeps = _timed(sc, repeats)
+        (timed,) = _timed([sc], repeats)
     except SimulationError as exc:
-        return [_empty(name, sc, setting, h, f"unstable: {str(exc)[:50]}") for name, _ in sc.rows]
+        return _unstable(sc, setting, h, exc)
+    return _measured_rows(kind, sc, setting, h, timed, reference_h)
+
+
+def _measured_rows(kind, sc, setting, h, timed, reference_h, note="", beside=NAN):
+    """The rows of a timed run of ``sc``: its errors against the scene's reference."""
+    states, walls, substeps = timed
+    ref, ref_errors = ps.reference(kind, h, reference_h.get(kind, 0.0))
     dist = ps.distances(ps.samples(sc, states), ref)
     rows = []
     for name, ix in sc.rows:
         steps, wall = sc.marks[ix[-1]], float(walls[ix[-1]])
         rows.append(PrecisionRow(name, setting.name, h, steps, wall, steps / wall,
                                  steps * h / wall, float(dist[list(ix)].max()), sc.unit,
-                                 ref_error=ref_errors[name], substeps=substeps))  # fmt: skip
+                                 ref_error=ref_errors[name], substeps=substeps, note=note,
+                                 beside=beside))  # fmt: skip
     return rows
+
+
+def _unstable(sc: ps.Scene, setting: Setting, h: float, exc: Exception) -> list[PrecisionRow]:
+    return [_empty(name, sc, setting, h, f"unstable: {str(exc)[:50]}") for name, _ in sc.rows]
 
 
 def _empty(name: str, sc: ps.Scene, setting: Setting, h: float, note: str) -> PrecisionRow:
@@ -152,9 +184,14 @@ def _empty(name: str, sc: ps.Scene, setting: Setting, h: float, note: str) -> Pr
 
 
 def with_time_ratios(rows: list[PrecisionRow]) -> list[PrecisionRow]:
-    """Each row's time ÷ the baseline's at the same scene and h (nan without one)."""
+    """Each row's time ÷ the baseline's at the same scene and h (an equal-time run's: at
+    the h it was timed beside; nan without one)."""
     base = {(r.scene, r.h): r.seconds for r in rows if r.setting == BASELINE}
-    return [replace(r, time_ratio=r.seconds / base.get((r.scene, r.h), NAN)) for r in rows]
+
+    def at(r: PrecisionRow) -> float:
+        return r.h if math.isnan(r.beside) else r.beside
+
+    return [replace(r, time_ratio=r.seconds / base.get((r.scene, at(r)), NAN)) for r in rows]
 
 
 def study(
@@ -171,7 +208,7 @@ def study(
     coarser references.  ``peers``: MuJoCo's rows too (when it is installed)."""
     settings = settings or (QUICK_SETTINGS if quick else SETTINGS)
     steps_h = steps_h or (QUICK_STEPS_H if quick else STEPS_H)
-    repeats = repeats or (1 if quick else 3)
+    repeats = repeats or (1 if quick else None)  # None: steady timings (_timed)
     reference_h = {**(QUICK_REFERENCE_H if quick else REFERENCE_H), **(reference_h or {})}
     rows = []
     for kind in (k for k in KINDS if k in scenes):
@@ -183,7 +220,7 @@ def study(
     if peers:
         from puppetcli.precision_peers import peer_rows
 
-        rows += peer_rows(tuple(k for k in scenes if k != "creep"), steps_h, quick)
+        rows += peer_rows(tuple(k for k in scenes if k != "creep"), steps_h, quick, repeats)
     order = {name: i for i, name in enumerate(ROW_SCENES)}
     rows.sort(key=lambda r: order.get(r.scene, len(order)))  # stable: one block per scene
     return with_time_ratios(rows)
@@ -204,31 +241,55 @@ def equal_time_h(h_base: float, seconds_base: float, seconds: float) -> float | 
 
 
 def equal_time_rows(
-    rows: list[PrecisionRow], settings: list[Setting], repeats: int, reference_h: dict[str, float]
+    rows: list[PrecisionRow],
+    settings: list[Setting],
+    repeats: int | None,
+    reference_h: dict[str, float],
 ) -> list[PrecisionRow]:
     """Measured points at equal run time, so the verdict's "lower error at equal or lower
     run time" compares runs, never an interpolated curve: each EQUAL_TIME setting that
     was fast enough at one of the baseline's steps runs again at the finest step planned
     to spend at most EQUAL_TIME_BUDGET of the baseline's time there (``equal_time_h``;
-    judged on each scene's longest row, its whole run).  Their note is EQUAL_TIME_NOTE."""
-    by_name = {s.name: s for s in settings}
+    judged on each scene's longest row, its whole run).
+
+    Each such run is timed beside the baseline at that step, their runs interleaved
+    (``_timed``): the baseline row was measured minutes earlier, and the shared machine's
+    speed drifts by up to ~1.5× in that time (one study's equal-time doll runs came out
+    at 0.69× the speed of the same setting's runs before them).  The run's seconds are
+    reported in the baseline row's terms, × its seconds ÷ the baseline's re-timed ones,
+    so they compare with that row (and only that one: ``beside``).  Their note is
+    EQUAL_TIME_NOTE."""
+    by_name = {s.name: s for s in (*SETTINGS, *settings)}
     longest: dict[tuple, PrecisionRow] = {}
     for r in rows:
         key = (ROW_KIND.get(r.scene), r.setting, r.h)
         if math.isfinite(r.seconds) and (key not in longest or r.steps > longest[key].steps):
             longest[key] = r
-    planned = []
+    out = []
     for (kind, name, h), r in longest.items():
         base = longest.get((kind, BASELINE, h))
         if name in EQUAL_TIME and name in by_name and base is not None:
             h_eq = equal_time_h(h, base.seconds, r.seconds)
-            if h_eq is not None and (kind, name, h_eq) not in planned:
-                planned.append((kind, name, h_eq))
-    out = []
-    for kind, name, h_eq in planned:
-        got = scene_rows(kind, by_name[name], h_eq, repeats, reference_h)
-        out += [replace(r, note=r.note or EQUAL_TIME_NOTE) for r in got]
+            if h_eq is not None:
+                out += _beside(kind, by_name[name], h_eq, (by_name[BASELINE], base), repeats,
+                               reference_h)  # fmt: skip
     return out
+
+
+def _beside(kind, setting, h, baseline, repeats, reference_h) -> list[PrecisionRow]:
+    """The rows of ``setting`` at h timed beside baseline = (its Setting, its longest row
+    at its own h), in that row's terms (``equal_time_rows``)."""
+    base_setting, base_row = baseline
+    sc, _ = _scene(kind, setting, h)
+    sc_base, _ = _scene(kind, base_setting, base_row.h)
+    try:
+        timed, (_, base_walls, _) = _timed([sc, sc_base], repeats)
+    except SimulationError as exc:
+        return _unstable(sc, setting, h, exc)
+    states, walls, substeps = timed
+    scale = base_row.seconds / float(base_walls[-1])
+    return _measured_rows(kind, sc, setting, h, (states, walls * scale, substeps), reference_h,
+                          EQUAL_TIME_NOTE, base_row.h)  # fmt: skip
 
 
 def format_table(rows: list[PrecisionRow]) -> str:

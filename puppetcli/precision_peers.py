@@ -21,9 +21,9 @@ from __future__ import annotations
 import numpy as np
 
 from puppetcli import peers
-from puppetcli.bench import LIFT
+from puppetcli.bench import LIFT, repeats_for
 from puppetcli.precision import PrecisionRow
-from puppetcli.precision_scenes import CHAIN_TIMES, DOLL_LIFT, doll_model
+from puppetcli.precision_scenes import CHAIN_TIMES, DOLL_LIFT, DOLL_TIMES, doll_model
 from solver.errors import SimulationError
 from solver.fast import fast_step
 from solver.observe import bone_tails, joint_gaps
@@ -46,21 +46,27 @@ def _row(scene: str, name: str, r: dict, error: float, steps: int, seconds: floa
                         error, "m", ref_error=r["ref_error"], note=note)  # fmt: skip
 
 
-def peer_rows(kinds: tuple[str, ...], steps_h: list[float], quick: bool) -> list[PrecisionRow]:
-    """MuJoCo's rows of the scene kinds ("chain", "doll") at each h, per integrator."""
+def peer_rows(
+    kinds: tuple[str, ...], steps_h: list[float], quick: bool, repeats: int | None = None
+) -> list[PrecisionRow]:
+    """MuJoCo's rows of the scene kinds ("chain", "doll") at each h, per integrator, each
+    timed over ``repeats`` runs, or (None) as many as make a steady timing, the rule of
+    our rows (puppetcli.precision)."""
     ref_h = QUICK_REFERENCE_H if quick else REFERENCE_H
     rows = []
     for integrator in INTEGRATORS:
         name = f"mujoco-{integrator.lower()}"
         for h in steps_h:
             if "chain" in kinds:
-                r = peers.chain_error(h, integrator, ref_h)
+                runs = repeats or repeats_for(round(CHAIN_TIMES[-1] / h), "mujoco")
+                r = peers.chain_error(h, integrator, ref_h, runs)
                 share = round(CHAIN_TIMES[0] / h) / r["steps"]
                 rows.append(_row("chain-1s", name, r, r["error_1s"], round(CHAIN_TIMES[0] / h),
                                  r["seconds"] * share, "time: share of the 3 s run"))  # fmt: skip
                 rows.append(_row("chain-3s", name, r, r["error_3s"], r["steps"], r["seconds"]))
             if "doll" in kinds:
-                r = peers.doll_error(h, integrator, ref_h)
+                runs = repeats or repeats_for(round(DOLL_TIMES[-1] / h), "mujoco")
+                r = peers.doll_error(h, integrator, ref_h, runs)
                 rows.append(_row("doll", name, r, r["error"], r["steps"], r["seconds"]))
     return rows
 

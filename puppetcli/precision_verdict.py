@@ -1,21 +1,22 @@
 """Reading the work-precision study: does any setting beat the baseline at equal cost?
 
-For one scene, each measured point of the baseline (one per step h: wall time t_b,
-error e_b) is compared with every other setting's points: the setting *beats* that
-baseline point when one of its points has time ≤ t_b and an error lower beyond doubt,
-e < (1 − TIE)·e_b − 2·ref_error (a baseline run that broke down counts as e_b = ∞).
-The margin: each error is known only to within the reference's own error, and
-settings that solve the same problem to rounding (every solver on the one-joint
-creep) must not "win" by the last digit.  Times are compared as measured (≤: "equal
-or lower run time"), so between settings of equal cost the verdict can go either way
-with the machine's timing noise; the line prints the time ratio so a reader can tell.
-Only measured points are compared: no curve is interpolated or extrapolated, so a
-claim never rests on a point nobody ran.  To compare at equal run time the study runs
-the faster settings again at the finest step planned to spend at most 90 % of the
-baseline's time (``precision.equal_time_rows``, EQUAL_TIME_BUDGET); those are measured
-points like the others.  The winner of a scene is the setting that beats the most
-baseline points, ties broken by the larger geometric-mean error ratio e_b / e over the
-points it beats.
+For one scene, each measured point of the baseline (one per step h: wall time t_b, error
+e_b) is compared with every other setting's points: the setting *beats* that baseline
+point when one of its points has time ≤ t_b and an error lower beyond doubt, e < (1 −
+TIE)·e_b − 2·ref_error (a baseline run that broke down counts as e_b = ∞). The margin:
+each error is known only to within the reference's own error, and settings that solve
+the same problem to rounding (every solver on the one-joint creep) must not "win" by the
+last digit.  Times are compared as measured (≤: "equal or lower run time"), so between
+settings of equal cost the verdict can go either way with the machine's timing noise;
+the line prints the time ratio so a reader can tell.  Only measured points are compared:
+no curve is interpolated or extrapolated, so a claim never rests on a point nobody ran.
+To compare at equal run time the study runs the faster settings again at the finest step
+planned to spend at most 90 % of the baseline's time (``precision.equal_time_rows``,
+EQUAL_TIME_BUDGET), each timed beside the baseline at its step and reported in that
+baseline point's terms; those are measured points like the others, compared with that
+baseline point only (``beside``). The winner of a scene is the setting that beats the
+most baseline points, ties broken by the larger geometric-mean error ratio e_b / e over
+the points it beats.
 
 The line also answers the dual question, the baseline's accuracy in less time
 (``as_accurate_for_less``), where "less" means below (1 − TIME_TIE) of the baseline's
@@ -66,6 +67,12 @@ def _measured(r: PrecisionRow) -> bool:
     return math.isfinite(r.seconds) and math.isfinite(r.error)
 
 
+def comparable(r: PrecisionRow, b: PrecisionRow) -> bool:
+    """Whether r's time compares with baseline point b's: an equal-time run's only with
+    the point it was timed beside (its seconds are in that point's terms)."""
+    return math.isnan(r.beside) or r.beside == b.h
+
+
 def matches(rows: list[PrecisionRow], setting: str) -> list[Match]:
     """For each baseline point of the rows (one scene), ``setting``'s best point that
     is no slower."""
@@ -74,7 +81,7 @@ def matches(rows: list[PrecisionRow], setting: str) -> list[Match]:
     mine = [r for r in rows if r.setting == setting and _measured(r)]
     out = []
     for b in base:
-        fast_enough = [r for r in mine if r.seconds <= b.seconds]
+        fast_enough = [r for r in mine if comparable(r, b) and r.seconds <= b.seconds]
         out.append(Match(b, min(fast_enough, key=lambda r: r.error, default=None)))
     return out
 
@@ -105,7 +112,8 @@ def as_accurate_for_less(rows: list[PrecisionRow]) -> tuple[PrecisionRow, Precis
     for b in base:
         for r in others:
             doubt = 2.0 * max(b.ref_error, r.ref_error)
-            if r.error <= (1.0 + TIE) * b.error + doubt and r.seconds / b.seconds < best_ratio:
+            faster = comparable(r, b) and r.seconds / b.seconds < best_ratio
+            if faster and r.error <= (1.0 + TIE) * b.error + doubt:
                 best, best_ratio = (b, r), r.seconds / b.seconds
     return best
 

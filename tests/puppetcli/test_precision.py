@@ -7,6 +7,7 @@ from __future__ import annotations
 import csv
 import itertools
 import math
+from dataclasses import replace
 
 import cv2
 import numpy as np
@@ -211,6 +212,20 @@ def test_verdict_counts_a_broken_baseline_run_as_beaten():
     assert "a run that broke down" in verdict_line(rows, "s")
 
 
+def test_an_equal_time_run_compares_only_with_the_baseline_point_timed_beside_it():
+    # Timed beside the 5 ms point, in its terms: it beats that point (1.9 s ≤ 2 s, more
+    # accurate), but its seconds say nothing about the 20 ms point's 1.0 s run, measured
+    # in another phase of the machine, nor about the 1 ms point's.
+    eq = replace(_row("auto", 1.9, 1e-4, 0.004), beside=0.005)
+    name, ms = winner(BASE + [eq])
+    assert name == "auto" and [m.beats for m in ms] == [False, True, False]
+    assert winner(BASE + [replace(eq, beside=0.02)]) is None  # beside 20 ms: 1.9 s > 1.0 s
+    cheap = replace(_row("cheap", 0.5, 1e-2, 0.02), beside=0.005)
+    assert as_accurate_for_less(BASE[:1] + [cheap]) is None  # the 20 ms point is not its own
+    base, other = as_accurate_for_less(BASE + [replace(cheap, error=5e-3)])
+    assert (base.h, other.setting) == (0.005, "cheap")
+
+
 def test_csv_parses_back_with_every_column_and_png_has_four_panels(quick_rows, tmp_path):
     csv_path, png_path = write_outputs(quick_rows, tmp_path / "out")
     with open(csv_path, newline="") as f:
@@ -255,7 +270,7 @@ def test_equal_time_step_spends_the_baselines_time_on_the_sample_grid():
         scenes.key_steps(h, times)  # every sample time stays a step boundary
 
 
-def test_equal_time_runs_are_measured_at_the_finer_step():
+def test_equal_time_runs_are_measured_at_the_finer_step(monkeypatch):
     # A baseline point at 20 ms that took 1/0.45 of auto's time: auto runs again at 10 ms
     # (a real run, noted), and creep's first-order error there is about half of 20 ms's.
     auto = Setting("auto", "auto")
@@ -263,8 +278,22 @@ def test_equal_time_runs_are_measured_at_the_finer_step():
     def row(setting, seconds, h=0.02):
         return PrecisionRow("creep", setting, h, 300, seconds, math.nan, math.nan, 3.97e-4, "rad")
 
+    timed = precision._timed
+    runs = []  # (scene's h, its real marks) of every timing, walls made up: 3 s and 1.5 s
+
+    def made_up(scs, repeats):
+        got = timed(scs, repeats)
+        runs.append([sc.model.options.h for sc in scs])
+        walls = (3.0, 1.5)[: len(got)]
+        return [(st, np.full(len(w), t), sub) for (st, w, sub), t in zip(got, walls, strict=True)]
+
+    monkeypatch.setattr(precision, "_timed", made_up)
     got = precision.equal_time_rows([row(BASELINE, 1.0), row("auto", 0.45)], [auto], 1, {})
     (r,) = got
     assert (r.scene, r.setting, r.note) == ("creep", "auto", precision.EQUAL_TIME_NOTE)
     assert r.h == pytest.approx(0.01) and r.steps == 600
     assert 0.5 * 3.97e-4 < r.error < 0.6 * 3.97e-4
+    # Timed beside the 20 ms baseline (run again with it) and stated in that row's terms:
+    # 3 s beside the baseline's 1.5 s, whose row says 1.0 s, is 2.0 s.
+    assert runs == [[pytest.approx(0.01), 0.02]]
+    assert r.beside == 0.02 and r.seconds == pytest.approx(2.0, rel=1e-12)
