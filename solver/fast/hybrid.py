@@ -205,13 +205,15 @@ def _round(bw, tree, h, rw, lam, vel_p, its, nu, grips, lam0, iters, asleep, sv,
 
 @njit(cache=True, error_model="numpy", inline="always")
 def hybrid_solve(bw, tree, h, rw, n, ne, vel_free, lam0, iterations, grip, skip, asleep, sv,
-                 lam, vel):  # fmt: skip
-    """(ok, sweeps, residual) as solver.hybrid.hybrid_solve, λ into lam[:n] and the
-    velocities into vel; ok False when the exact system is degenerate; bw: the solvers'
-    model arrays (solver.fast.kernel.solve); h: the step; ``skip``: leave dormant rows
-    out of the iteration; asleep (nb,) bool: sleeping bodies (their islands are not in
-    the forest); sv: the solvers' scratch (kernel.step_arrays: nothing is allocated
-    unless more than NU_CAP rows are iterated)."""
+                 lam, vel, rounds):  # fmt: skip
+    """(code, sweeps, residual) as solver.hybrid.hybrid_solve, λ into lam[:n] and the
+    velocities into vel; code 0: the sets settled, 1: not within ``rounds`` (λ clipped to
+    its bounds), 2: the exact system is degenerate.  bw: the solvers' model arrays
+    (solver.fast.kernel.solve); h: the step; ``skip``: leave dormant rows out of the
+    iteration; asleep (nb,) bool: sleeping bodies (their islands are not in the forest);
+    sv: the solvers' scratch (kernel.step_arrays: nothing is allocated unless more than
+    NU_CAP rows are iterated).  Without iterated rows (a table of joint and grip rows
+    only) this is the direct solve's active set on the grip (kernel.direct)."""
     grip0, ngrip, body = grip
     resp_a, resp_b = bw[3], bw[4]
     (at_lo, at_hi, dormant), (its, pinned, _, _, _, _, free_grip) = sv[0], sv[1]
@@ -224,7 +226,7 @@ def hybrid_solve(bw, tree, h, rw, n, ne, vel_free, lam0, iterations, grip, skip,
             dormant[i] = False
     lo, hi, kind = rw[4], rw[5], rw[11]
     sweeps, residual = 0, 0.0
-    for _ in range(ROUNDS):
+    for _ in range(rounds):
         nu, nfree, npin = 0, 0, 0
         for i in range(ne, n):
             lam[i] = lo[i] if at_lo[i] else hi[i] if at_hi[i] else 0.0
@@ -242,12 +244,12 @@ def hybrid_solve(bw, tree, h, rw, n, ne, vel_free, lam0, iterations, grip, skip,
             asleep, sv, vel,
         )  # fmt: skip
         if not ok:
-            return False, 0, 0.0
+            return 2, 0, 0.0
         if not _update_sets(rw, ne, n, lam, vel, grip0, ngrip, dormant, at_lo, at_hi):
-            return True, sweeps, residual
+            return 0, sweeps, residual
     for i in range(n):
         lam[i] = min(max(lam[i], lo[i]), hi[i])
-    return True, sweeps, residual
+    return 1, sweeps, residual
 
 
 @njit(cache=True, error_model="numpy")

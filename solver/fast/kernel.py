@@ -34,12 +34,9 @@ from solver.fast.contacts import (
     world_shapes,
 )
 from solver.fast.flat import node_count, row_capacity, unflatten
-from solver.fast.hybrid import NU_CAP, hybrid_solve
+from solver.fast.hybrid import NU_CAP, ROUNDS, hybrid_solve
 from solver.fast.kin import frames, matvec
 from solver.fast.post import (
-    apply,
-    apply_listed,
-    copy6,
     gaps_within,
     integrate,
     needs_projection,
@@ -58,7 +55,7 @@ from solver.fast.rows import (
     limit_rows,
     rheology_rows,
 )
-from solver.fast.tree import forest_sequence, row_velocity, tree_solve
+from solver.fast.tree import row_velocity
 from solver.pgs import pgs_into
 from solver.rows import KIND_GRIP, KIND_RHEOLOGY
 from solver.sleep import settle, touch
@@ -209,63 +206,32 @@ def _warm_fill(factor, keys, values, row_key, n, lam):
         lam[i] = factor * values[at]
 
 
-@njit(cache=True, error_model="numpy")
-def _tree_pass(bw, tree, h, rw, vel_free, free_grip, ngrip, body, asleep, lam):
-    """λ of the joint rows and the free grip rows by the tree elimination (pinned rows'
-    forces are already in vel_free); False when the system is degenerate."""
-    _, parent, _, _, seq, rows, size, tw = tree
-    joint_bone, mass, movable, _, _, _, inertia_w = bw
-    nb = len(vel_free)
-    nseq = forest_sequence(tree, nb, movable, free_grip, ngrip, body, asleep, joint_bone)
-    return tree_solve(seq, nseq, parent, nb, rw, vel_free, h, mass, inertia_w, rows, size, tw, lam)
-
-
 @njit(cache=True, error_model="numpy", _nrt=False)
-def direct(bw, tree, h, rw, n, vel_free, grip, asleep, sv, lam, vel):
-    """(code, residual) as solver.direct.direct_solve, λ into lam[:n] and the velocities
-    into vel: a primal active set on the box-QP.  Rows pinned at a bound (at_lo/at_hi)
-    have their force folded into v_free and the free rows are solved by the tree; a
-    pinned row is released when its residual r = J v + C λ + β no longer pushes against
-    the bound (r > 0 at hi, r < 0 at lo), a free row whose force leaves its box is
-    pinned; ≤ DIRECT_ROUNDS rounds.  sv: the solvers' scratch (step_arrays).
-    code 0: settled; 1: not settled (λ clipped, PGS finishes); 2: degenerate (fall back)."""
-    grip0, ngrip, body = grip
-    resp_a, resp_b = bw[3], bw[4]
-    lo, hi = rw[4], rw[5]
-    (at_lo, at_hi, _), (_, pinned, _, _, _, _, free_grip) = sv[0], sv[1]
-    vel_p = sv[3][0]
-    for i in range(n):
-        at_lo[i], at_hi[i], lam[i] = False, False, 0.0
-    for _ in range(DIRECT_ROUNDS):
-        nfree, npin = 0, 0
-        for i in range(grip0, grip0 + ngrip):
-            if at_lo[i] or at_hi[i]:
-                lam[i] = lo[i] if at_lo[i] else hi[i]
-                pinned[npin], npin = i, npin + 1
-            else:
-                free_grip[nfree], nfree = i, nfree + 1
-        copy6(vel_free, vel_p)
-        apply_listed(rw, pinned, npin, resp_a, resp_b, lam, vel_p)
-        if not _tree_pass(bw, tree, h, rw, vel_p, free_grip, nfree, body, asleep, lam):
+def direct(bw, tree, h, rw, n, ne, vel_free, lam0, grip, asleep, sv, lam, vel):
+    """(code, residual) as solver.direct.direct_solve on a table of ne joint rows and
+    then grip rows only, λ into lam[:n] and the velocities into vel: a primal active set
+    on the box-QP, the hybrid's exact rounds with nothing to iterate (hybrid_solve: pinned
+    grip rows' forces folded into v_free, the joints and free grip rows solved by the
+    tree, its velocities taken from the tree; a pinned row released when its residual
+    r = J v + C λ + β no longer pushes against the bound, a free one that leaves its box
+    pinned; ≤ DIRECT_ROUNDS rounds).  residual: max |r| over the free rows.  code 0:
+    settled; 1: not settled (λ clipped, PGS finishes); 2: degenerate, or a row that is
+    neither (fall back)."""
+    for i in range(ne, n):
+        if rw[11][i] != KIND_GRIP:
             return 2, 0.0
-        copy6(vel_free, vel)
-        apply(rw, n, resp_a, resp_b, lam, vel)
-        changed, residual = False, 0.0
-        for i in range(n):
-            r = row_velocity(rw, i, vel) + rw[6][i] * lam[i] + rw[7][i]
-            if (at_hi[i] and r > 0.0) or (at_lo[i] and r < 0.0):
-                at_lo[i], at_hi[i], changed = False, False, True
-            elif not (at_lo[i] or at_hi[i]):
-                residual = max(residual, abs(r))
-                if lam[i] < lo[i] or lam[i] > hi[i]:
-                    if not grip0 <= i < grip0 + ngrip:
-                        return 2, 0.0
-                    at_lo[i], at_hi[i], changed = lam[i] < lo[i], lam[i] > hi[i], True
-        if not changed:
-            return 0, residual
+    code, _, _ = hybrid_solve(
+        bw, tree, h, rw, n, ne, vel_free, lam0, 0, grip, False, asleep, sv, lam, vel,
+        DIRECT_ROUNDS,
+    )  # fmt: skip
+    if code != 0:
+        return code, 0.0
+    at_lo, at_hi = sv[0][0], sv[0][1]
+    residual = 0.0
     for i in range(n):
-        lam[i] = min(max(lam[i], lo[i]), hi[i])
-    return 1, 0.0
+        if not (at_lo[i] or at_hi[i]):
+            residual = max(residual, abs(row_velocity(rw, i, vel) + rw[6][i] * lam[i] + rw[7][i]))
+    return 0, residual
 
 
 @njit(cache=True, error_model="numpy", inline="always")
@@ -287,27 +253,31 @@ def solve(bw, tree, rw, opt, iopt, warm, n, vel_free, grip, asleep, sv, lam0, la
             bilateral = False
     method = iopt[0]
     hybrid = method == METHOD_HYBRID or (method == METHOD_AUTO and not bilateral)
+    exact = method == METHOD_DIRECT or (method == METHOD_AUTO and bilateral)
     ne = 0
-    while hybrid and ne < n and kind[ne] <= KIND_RHEOLOGY:
+    while (hybrid or exact) and ne < n and kind[ne] <= KIND_RHEOLOGY:
         ne += 1
-    response(rw, ne, n, bw[2], bw[5], opt[0], bw[3], bw[4])
+    response(rw, ne, n, bw[2], bw[5], opt[0], bw[3], bw[4])  # (the tree needs none)
     warm_start(opt, iopt, warm, rw, n, lam0)
-    if method == METHOD_DIRECT or (method == METHOD_AUTO and bilateral):
+    if exact:
         if not bilateral:
             return FALLBACK, 0, 0.0, SOLVER_DIRECT
-        code, residual = direct(bw, tree, opt[0], rw, n, vel_free, grip, asleep, sv, lam, vel)
+        code, residual = direct(
+            bw, tree, opt[0], rw, n, ne, vel_free, lam0, grip, asleep, sv, lam, vel
+        )
         if code == 2:
             return FALLBACK, 0, 0.0, SOLVER_DIRECT
         if code == 0:
             return OK, 1, residual, SOLVER_DIRECT
+        response(rw, 0, ne, bw[2], bw[5], opt[0], bw[3], bw[4])  # PGS reads every row's
         for i in range(n):
             lam0[i] = lam[i]
     if hybrid:
-        ok, sweeps, residual = hybrid_solve(
+        code, sweeps, residual = hybrid_solve(
             bw, tree, opt[0], rw, n, ne, vel_free, lam0, iopt[1], grip, iopt[9], asleep, sv, lam,
-            vel,
+            vel, ROUNDS,
         )  # fmt: skip
-        return (OK if ok else FALLBACK), sweeps, residual, SOLVER_HYBRID
+        return (OK if code != 2 else FALLBACK), sweeps, residual, SOLVER_HYBRID
     sweeps, residual = pgs_into(
         n, rw[0], rw[1], rw[2], rw[3], bw[3], bw[4], rw[4], rw[5], rw[6], rw[7], rw[8], rw[9],
         vel_free, lam0, iopt[1], 1e-12, lam, vel, sv[2][0],
