@@ -16,6 +16,9 @@ that compiles the kernels for the configuration: as many runs as make a steady t
 (``puppetcli.bench.repeats_for``, the rule of ``bench``'s table: at least 5 runs and
 3,000 timed steps, so a 75-step doll run at 20 ms is timed 40 times), the same rule for
 the MuJoCo rows; ``--quick`` times one run (a study given ``repeats`` times that many).
+The runs of every setting at one scene and step are interleaved round by round, as in
+``bench``'s table: the shared machine's speed drifts by up to ~1.5× within a minute,
+and so the time ratios between them are measured in the same phase.
 Times are only comparable within one run of the study (DESIGN.md: speed is measured as
 ratios): ``time_ratio`` is a row's seconds ÷ the baseline's at the same scene and h in
 the same run.  A setting that cannot run a scene (direct with contacts) is a row with
@@ -120,21 +123,32 @@ def configure(model: Model, setting: Setting, h: float) -> Model:
     )
 
 
-def _timed(scenes: list[ps.Scene], repeats: int | None) -> list[tuple]:
-    """For each scene: (states at the marks, the best wall seconds to each mark, mean
-    substeps); ``repeats`` runs, or (None) as many as make a steady timing (module
-    docstring), the scenes' runs interleaved round by round (a drifting machine slows
-    them alike)."""
-    for sc in scenes:
-        ps.run_scene(replace(sc, inputs=sc.inputs[:10], marks=[]))  # compiles, fills caches
-    runs = max(repeats or repeats_for(len(sc.inputs), "sim") for sc in scenes)
+def _timed(scenes: list[ps.Scene], repeats: int | None) -> list:
+    """For each scene: (samples at the marks, the best wall seconds to each mark, mean
+    substeps), or the SimulationError its run raised; ``repeats`` runs, or (None) as many
+    as make a steady timing (module docstring), the scenes' runs interleaved round by
+    round, so a drifting machine slows them alike and their ratios hold."""
+    out: list = [None] * len(scenes)
     best = [np.full(len(sc.marks), math.inf) for sc in scenes]
-    last: list = [None] * len(scenes)
+    for k, sc in enumerate(scenes):
+        out[k] = _attempt(replace(sc, inputs=sc.inputs[:10], marks=[]))  # compiles, warms
+    runs = max(repeats or repeats_for(len(sc.inputs), "sim") for sc in scenes)
     for _ in range(runs):
         for k, sc in enumerate(scenes):
-            states, walls, substeps = ps.run_scene(sc)
-            best[k], last[k] = np.minimum(best[k], walls), (states, substeps)
-    return [(states, b, substeps) for (states, substeps), b in zip(last, best, strict=True)]
+            if not isinstance(out[k], SimulationError):
+                out[k] = _attempt(sc)
+                if not isinstance(out[k], SimulationError):
+                    best[k] = np.minimum(best[k], out[k][1])
+    return [got if isinstance(got, SimulationError) else (got[0], b, got[2])
+            for got, b in zip(out, best, strict=True)]  # fmt: skip
+
+
+def _attempt(sc: ps.Scene):
+    """ps.run_scene(sc), or the SimulationError it raised."""
+    try:
+        return ps.run_scene(sc)
+    except SimulationError as exc:
+        return exc
 
 
 def _scene(kind: str, setting: Setting, h: float) -> tuple[ps.Scene, str]:
@@ -147,24 +161,31 @@ def _scene(kind: str, setting: Setting, h: float) -> tuple[ps.Scene, str]:
 
 
 def scene_rows(
-    kind: str, setting: Setting, h: float, repeats: int | None, reference_h: dict[str, float]
+    kind: str, settings: list[Setting], h: float, repeats: int | None, reference_h: dict
 ) -> list[PrecisionRow]:
-    """The rows of one scene kind for one setting at step h."""
-    sc, why = _scene(kind, setting, h)
-    if why:
-        return [_empty(name, sc, setting, h, why) for name, _ in sc.rows]
-    try:
-        (timed,) = _timed([sc], repeats)
-    except SimulationError as exc:
-        return _unstable(sc, setting, h, exc)
-    return _measured_rows(kind, sc, setting, h, timed, reference_h)
+    """The rows of one scene kind for every setting at step h, their runs timed together
+    (``_timed``: interleaved, so the time ratios between them are the same phase's)."""
+    prepared = [(s, *_scene(kind, s, h)) for s in settings]
+    runnable = [(s, sc) for s, sc, why in prepared if not why]
+    timed = dict(zip((s.name for s, _ in runnable), _timed([sc for _, sc in runnable], repeats),
+                     strict=True))  # fmt: skip
+    rows = []
+    for s, sc, why in prepared:
+        if why:
+            rows += [_empty(name, sc, s, h, why) for name, _ in sc.rows]
+        else:
+            rows += _measured_rows(kind, sc, s, h, timed[s.name], reference_h)
+    return rows
 
 
 def _measured_rows(kind, sc, setting, h, timed, reference_h, note="", beside=NAN):
-    """The rows of a timed run of ``sc``: its errors against the scene's reference."""
-    states, walls, substeps = timed
+    """The rows of a timed run of ``sc`` (``_timed``'s): its errors against the scene's
+    reference, or unstable rows when its run broke down."""
+    if isinstance(timed, SimulationError):
+        return _unstable(sc, setting, h, timed)
+    got, walls, substeps = timed
     ref, ref_errors = ps.reference(kind, h, reference_h.get(kind, 0.0))
-    dist = ps.distances(ps.samples(sc, states), ref)
+    dist = ps.distances(got, ref)
     rows = []
     for name, ix in sc.rows:
         steps, wall = sc.marks[ix[-1]], float(walls[ix[-1]])
@@ -213,8 +234,7 @@ def study(
     rows = []
     for kind in (k for k in KINDS if k in scenes):
         for h in steps_h:
-            for s in settings:
-                rows += scene_rows(kind, s, h, repeats, reference_h)
+            rows += scene_rows(kind, settings, h, repeats, reference_h)
     if not quick:
         rows += equal_time_rows(rows, settings, repeats, reference_h)
     if peers:
@@ -282,14 +302,13 @@ def _beside(kind, setting, h, baseline, repeats, reference_h) -> list[PrecisionR
     base_setting, base_row = baseline
     sc, _ = _scene(kind, setting, h)
     sc_base, _ = _scene(kind, base_setting, base_row.h)
-    try:
-        timed, (_, base_walls, _) = _timed([sc, sc_base], repeats)
-    except SimulationError as exc:
-        return _unstable(sc, setting, h, exc)
-    states, walls, substeps = timed
-    scale = base_row.seconds / float(base_walls[-1])
-    return _measured_rows(kind, sc, setting, h, (states, walls * scale, substeps), reference_h,
-                          EQUAL_TIME_NOTE, base_row.h)  # fmt: skip
+    timed, base_timed = _timed([sc, sc_base], repeats)
+    if isinstance(base_timed, SimulationError):  # (it ran before: never seen)
+        timed = base_timed
+    elif not isinstance(timed, SimulationError):
+        got, walls, substeps = timed
+        timed = (got, walls * (base_row.seconds / float(base_timed[1][-1])), substeps)
+    return _measured_rows(kind, sc, setting, h, timed, reference_h, EQUAL_TIME_NOTE, base_row.h)
 
 
 def format_table(rows: list[PrecisionRow]) -> str:

@@ -159,15 +159,15 @@ def scene(kind: str, model: Model) -> Scene:
     raise ValueError(f"unknown scene {kind!r}")
 
 
-def run_scene(sc: Scene) -> tuple[list[State], list[float], float]:
-    """(states at the marks, wall seconds of the steps up to each mark, mean substeps).
+def run_scene(sc: Scene) -> tuple[list[np.ndarray], list[float], float]:
+    """(samples at the marks, wall seconds of the steps up to each mark, mean substeps).
 
     The steps run in place (solver.fast.sim.Sim: the same kernel and states as
     fast_step, bit for bit, without a new State object a step), so a time is the
     simulation's, as the MuJoCo rows' are mj_step's (puppetcli.peers): fast_step's own
     Python (~20 µs a step) would add the same to every setting and hide their
-    differences.  Copying a mark's state out (Sim.state) is reading the result, not
-    simulating: the clock stops for it."""
+    differences.  Reading a mark's sample (Sim.state, then sc.sample) is reading the
+    result, not simulating: the clock stops for it."""
     marks, kept, walls, substeps = set(sc.marks), [], [], 0
     sim, elapsed = Sim(sc.model), 0.0
     start = time.perf_counter()
@@ -177,13 +177,9 @@ def run_scene(sc: Scene) -> tuple[list[State], list[float], float]:
         if k in marks:
             elapsed += time.perf_counter() - start
             walls.append(elapsed)
-            kept.append(sim.state)
+            kept.append(sc.sample(sc.model, sim.state))
             start = time.perf_counter()
     return kept, walls, substeps / max(len(sc.inputs), 1)
-
-
-def samples(sc: Scene, states: list[State]) -> list[np.ndarray]:
-    return [sc.sample(sc.model, st) for st in states]
 
 
 def distances(a: list[np.ndarray], b: list[np.ndarray]) -> np.ndarray:
@@ -213,6 +209,6 @@ def _converged(kind: str, reference_h: float) -> tuple[list[np.ndarray], dict[st
     runs = []
     for h in (reference_h, 2.0 * reference_h):
         sc = scene(kind, base_model(kind).with_options(h=h, **options))
-        runs.append(samples(sc, run_scene(sc)[0]))
+        runs.append(run_scene(sc)[0])
     d = distances(runs[0], runs[1])
     return runs[0], {name: float(d[list(ix)].max()) for name, ix in sc.rows}

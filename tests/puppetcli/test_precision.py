@@ -89,7 +89,7 @@ def test_doll_grip_is_made_without_a_jump_and_lifts_by_the_benchs_lift():
 
 def _doll_heads(h: float) -> list[np.ndarray]:
     sc = scenes.scene("doll", scenes.doll_model().with_options(h=h, **scenes.DOLL_REFERENCE))
-    return scenes.samples(sc, scenes.run_scene(sc)[0])
+    return scenes.run_scene(sc)[0]
 
 
 def test_doll_reference_converges_at_first_order():
