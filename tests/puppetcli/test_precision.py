@@ -270,30 +270,48 @@ def test_equal_time_step_spends_the_baselines_time_on_the_sample_grid():
         scenes.key_steps(h, times)  # every sample time stays a step boundary
 
 
-def test_equal_time_runs_are_measured_at_the_finer_step(monkeypatch):
-    # A baseline point at 20 ms that took 1/0.45 of auto's time: auto runs again at 10 ms
-    # (a real run, noted), and creep's first-order error there is about half of 20 ms's.
-    auto = Setting("auto", "auto")
-
-    def row(setting, seconds, h=0.02):
-        return PrecisionRow("creep", setting, h, 300, seconds, math.nan, math.nan, 3.97e-4, "rad")
-
-    timed = precision._timed
-    runs = []  # (scene's h, its real marks) of every timing, walls made up: 3 s and 1.5 s
+def _made_up_walls(monkeypatch, walls):
+    """precision._timed with its real runs but made-up best times (walls[k] for the k-th
+    scene of each call, at every mark); returns the list of each call's steps."""
+    timed, runs = precision._timed, []
 
     def made_up(scs, repeats):
         got = timed(scs, repeats)
         runs.append([sc.model.options.h for sc in scs])
-        walls = (3.0, 1.5)[: len(got)]
-        return [(st, np.full(len(w), t), sub) for (st, w, sub), t in zip(got, walls, strict=True)]
+        return [(x, np.full(len(w), t), sub)
+                for (x, w, sub), t in zip(got, walls[: len(got)], strict=True)]  # fmt: skip
 
     monkeypatch.setattr(precision, "_timed", made_up)
-    got = precision.equal_time_rows([row(BASELINE, 1.0), row("auto", 0.45)], [auto], 1, {})
-    (r,) = got
+    return runs
+
+
+def _creep_row(setting, seconds, h=0.02):
+    return PrecisionRow("creep", setting, h, 300, seconds, math.nan, math.nan, 3.97e-4, "rad")
+
+
+def test_equal_time_runs_are_measured_at_the_finer_step(monkeypatch):
+    # A baseline point at 20 ms that took 1/0.45 of auto's time: auto runs again at 10 ms
+    # (a real run, noted), and creep's first-order error there is about half of 20 ms's.
+    auto = Setting("auto", "auto")
+    runs = _made_up_walls(monkeypatch, (1.2, 1.5))
+    rows = [_creep_row(BASELINE, 1.0), _creep_row("auto", 0.45)]
+    (r,) = precision.equal_time_rows(rows, [auto], 1, {})
     assert (r.scene, r.setting, r.note) == ("creep", "auto", precision.EQUAL_TIME_NOTE)
     assert r.h == pytest.approx(0.01) and r.steps == 600
     assert 0.5 * 3.97e-4 < r.error < 0.6 * 3.97e-4
     # Timed beside the 20 ms baseline (run again with it) and stated in that row's terms:
-    # 3 s beside the baseline's 1.5 s, whose row says 1.0 s, is 2.0 s.
+    # 1.2 s beside the baseline's 1.5 s, whose row says 1.0 s, is 0.8 s (within its time).
     assert runs == [[pytest.approx(0.01), 0.02]]
-    assert r.beside == 0.02 and r.seconds == pytest.approx(2.0, rel=1e-12)
+    assert r.beside == 0.02 and r.seconds == pytest.approx(0.8, rel=1e-12)
+
+
+def test_an_equal_time_run_over_the_baselines_time_is_planned_again_from_its_own(monkeypatch):
+    # 1.6 s beside 1.5 s is 1.0667 s in the row's terms, over its 1.0 s: planned again
+    # from 10 ms at that time, the finest grid step within 90 % is 0.5/42 s; both rows stay.
+    runs = _made_up_walls(monkeypatch, (1.6, 1.5))
+    rows = [_creep_row(BASELINE, 1.0), _creep_row("auto", 0.45)]
+    first, again = precision.equal_time_rows(rows, [Setting("auto", "auto")], 1, {})
+    assert runs == [[pytest.approx(0.01), 0.02], [pytest.approx(0.5 / 42), 0.02]]
+    assert first.note == precision.EQUAL_TIME_NOTE and first.seconds > 1.0
+    assert again.note == precision.REPLANNED_NOTE and again.h == pytest.approx(0.5 / 42)
+    assert 0.01 * 1.6 / 1.5 / (0.9 * 1.0) <= again.h < 0.5 / 41
