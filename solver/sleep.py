@@ -97,7 +97,7 @@ def _near(centre, bound, i, k, margin):
     return math.sqrt(d) - bound[i] - bound[k] <= margin
 
 
-@njit(cache=True, error_model="numpy", _nrt=True)
+@njit(cache=True, error_model="numpy", _nrt=False)  # allocates nothing: counts nothing
 def touch(island, asleep, still, fresh, loaded, grip_body, pointer, centre, bound, shape_body,
           pair_a, pair_b, margin, vel, omega, speed, spin):  # fmt: skip
     """Wake every island touched this step (module docstring), restart its timer and mark

@@ -242,13 +242,13 @@ def _pws(flat, k):
     )  # fmt: skip
 
 
-@njit(cache=True, _nrt=True)  # returns views: never without NRT (kernel._step)
+@njit(cache=True)
 def row_capacity(flat):
     """The row table's length (ws[0]: pack's worst case of rows a step can make)."""
     return flat[9][_WS, 1]
 
 
-@njit(cache=True, _nrt=True)  # returns views: never without NRT (kernel._step)
+@njit(cache=True)
 def node_count(flat):
     """The forest's number of nodes (tree[1], its parents: solver.fast.pack)."""
     return flat[9][_TREE + 1, 1]

@@ -110,9 +110,7 @@ def _solve_exact(seq, nseq, parent, nb, movable, rows, size, tw, vel, lam, out, 
     if forward:
         forward_pass(seq, nseq, parent, nb, size, tw, x, parent, ALL)
     backward_pass(seq, nseq, parent, nb, size, tw, x, parent, ALL)
-    for b in range(nb):
-        for k in range(6):
-            out[b, k] = vel[b, k]
+    copy6(vel, out)
     for q in range(nseq):
         i = seq[q]
         if i < nb:

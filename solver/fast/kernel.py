@@ -238,9 +238,9 @@ def direct(bw, tree, h, rw, n, ne, vel_free, lam0, grip, asleep, sv, lam, vel):
 def solve(bw, tree, rw, opt, iopt, warm, n, vel_free, grip, asleep, sv, lam0, lam, vel):
     """(status, iterations, residual, solver) as solver.step.solve; λ into lam[:n], the
     velocities into vel.  The row responses (bw[3], bw[4]) are made here, for the rows
-    the solver reads: all of them for the direct and PGS solves, only the bounded ones
-    (after the joints') for the hybrid, whose joint rows the tree solves from their
-    Jacobians.
+    the solver reads: only the rows after the joints' for the hybrid and direct solves,
+    whose joint rows the tree solves from their Jacobians, all of them for PGS (and for
+    the PGS that finishes a direct solve whose active set did not settle).
 
     bw: the model arrays the solvers read (joint_bone, mass, inverse mass, row responses
     a and b, world inverse inertia, world inertia: m[1], m[15], m[16], ws[1], ws[2],
