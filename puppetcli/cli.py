@@ -22,6 +22,7 @@ COMMANDS = {
     "rig": "puppetcli.commands.rig",
     "convert": "puppetcli.commands.convert",
     "record": "puppetcli.commands.record",
+    "live": "puppetcli.commands.live",
 }
 HELP = {
     "validate": "Check a rig file and summarise what its simulation needs.",
@@ -32,6 +33,7 @@ HELP = {
     "rig": "Make rigs from other formats (rig from-bvh FILE.bvh -o RIG.yaml).",
     "convert": "Run a manipulation script and write the motion as BVH.",
     "record": "Turn a script into the session a SPIDAR-G device would record (.mcap).",
+    "live": "Pose the doll by hand in the browser, recorded as a session (.mcap).",
 }
 
 

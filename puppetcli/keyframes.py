@@ -104,6 +104,10 @@ class KeyframeSet:
         else:
             self._keys.insert(i, key)
 
+    def pop(self) -> Keyframe:
+        """Remove and return the latest key (IndexError when there is none)."""
+        return self._keys.pop()
+
     def __iter__(self) -> Iterator[Keyframe]:
         return iter(list(self._keys))
 

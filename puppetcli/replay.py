@@ -29,7 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from puppetcli.errors import ScriptError, SessionError
-from puppetcli.runner import Runner, Until
+from puppetcli.runner import Runner, TouchMode, UndoKey, Until
 from puppetcli.script import Key, Push, Script
 from puppetcli.script_actions import GRIP_DEFAULTS, Expect, Grip, Release, frozen_vector
 from puppetcli.session import Event, Session, read_session
@@ -48,20 +48,24 @@ from solver.model import Model
 from solver.spec import RigSpec
 from solver.state import StepInput, StepReport
 
-__all__ = ["DeviceTrack", "Replay", "SessionRunner", "estimate_track", "load_replay"]
+__all__ = [
+    "DeviceTrack",
+    "EventActions",
+    "Replay",
+    "SessionRunner",
+    "TrackLookup",
+    "estimate_track",
+    "load_replay",
+]
 
 WARMUP_TICKS = 2000  # at most 2 s of the first sample before the recording starts
 SOLVER_KEYS = ("h", "method", "iterations", "warm_start", "warm_start_factor")
 
 
-@dataclass(frozen=True)
-class DeviceTrack:
-    """The grip pose per tick: time (T,) s; device_pos (T,3) m, device_quat (T,4) in the
-    device frame; world_pos (T,3) m, world_quat (T,4) through the workspace."""
+class TrackLookup:
+    """Pose look-up by time over per-tick arrays ``time``, ``world_pos``, ``world_quat``."""
 
     time: np.ndarray
-    device_pos: np.ndarray
-    device_quat: np.ndarray
     world_pos: np.ndarray
     world_quat: np.ndarray
 
@@ -74,6 +78,18 @@ class DeviceTrack:
         """World (position, quaternion) at time t, as ``pointer.Motion.pose``."""
         k = self.index(t)
         return self.world_pos[k], self.world_quat[k]
+
+
+@dataclass(frozen=True)
+class DeviceTrack(TrackLookup):
+    """The grip pose per tick: time (T,) s; device_pos (T,3) m, device_quat (T,4) in the
+    device frame; world_pos (T,3) m, world_quat (T,4) through the workspace."""
+
+    time: np.ndarray
+    device_pos: np.ndarray
+    device_quat: np.ndarray
+    world_pos: np.ndarray
+    world_quat: np.ndarray
 
 
 def estimate_track(session: Session) -> DeviceTrack:
@@ -209,24 +225,44 @@ def _script_action(event: Event, session: Session, model: Model) -> Push | Expec
     )  # fmt: skip
 
 
-def session_actions(session: Session, model: Model) -> tuple:
-    """The runner's actions: each event preceded by an ``Until`` its time.
+class EventActions:
+    """Turns a session's events, one after another, into the runner's actions.
 
     Buttons: grip down grips (ignored while gripping), grip up releases (ignored while
-    free), key down takes a key (label or "key N"); key up and other buttons are ignored.
+    free), key down takes a key (label or "key N"), touch down/up switches free-mode
+    touching on/off, undo down drops the last key; key up and other buttons are ignored.
     """
-    actions: list = []
-    gripping, keys = False, 0
-    for event in session.events:
-        m, action = event.message, None
+
+    def __init__(self, session: Session, model: Model) -> None:
+        self.session, self.model = session, model
+        self.gripping, self.keys = False, 0
+
+    def __call__(self, event: Event) -> object | None:
+        """The action of ``event`` (None when it does nothing)."""
+        m, session = event.message, self.session
+        line = int(m.get("line", event.index + 1))
         if event.topic == "/script/events":
-            action = _script_action(event, session, model)
-        elif m["button"] == "grip" and (m["state"] == "down") != gripping:
-            gripping = not gripping
-            action = _grip(event, session, model) if gripping else Release(int(m.get("line", 0)))
-        elif m["button"] == "key" and m["state"] == "down":
-            keys += 1
-            action = Key(m.get("label", f"key {keys}"), int(m.get("line", event.index + 1)))
+            return _script_action(event, session, self.model)
+        button, down = m["button"], m["state"] == "down"
+        if button == "grip" and down != self.gripping:
+            self.gripping = down
+            return _grip(event, session, self.model) if down else Release(int(m.get("line", 0)))
+        if button == "key" and down:
+            self.keys += 1
+            return Key(m.get("label", f"key {self.keys}"), line)
+        if button == "touch":
+            return TouchMode(down, line)
+        if button == "undo" and down:
+            return UndoKey(line)
+        return None
+
+
+def session_actions(session: Session, model: Model) -> tuple:
+    """The runner's actions: each event's (``EventActions``) preceded by an ``Until`` its time."""
+    actions: list = []
+    to_action = EventActions(session, model)
+    for event in session.events:
+        action = to_action(event)
         if action is not None:
             actions += [Until(event.t), action]
     return tuple(actions)
@@ -242,6 +278,16 @@ class Replay:
     session: Session
     script: Script
     track: DeviceTrack
+
+    @property
+    def warning(self) -> str | None:
+        """What a user should know before the replay (an abruptly ended recording)."""
+        if self.session.complete:
+            return None
+        return (
+            f"{self.session.source}: the recording ended abruptly; replaying the "
+            f"{self.session.end_time:.3f} s it holds"
+        )
 
     @property
     def pointer_active(self) -> bool:

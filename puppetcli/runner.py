@@ -60,6 +60,23 @@ class Until:
     line: int = 0
 
 
+@dataclass(frozen=True)
+class TouchMode:
+    """A session's touch switch: the free pointer pushes what it meets (on) or nothing (off).
+    Switched on inside a bone, it touches nothing until clear of the bones (as after a
+    release)."""
+
+    on: bool
+    line: int = 0
+
+
+@dataclass(frozen=True)
+class UndoKey:
+    """A session's undo button: drop the last key taken."""
+
+    line: int = 0
+
+
 @dataclass
 class RunResult:
     """What a run produced."""
@@ -102,24 +119,22 @@ class Runner:
         self.motion: Motion = still(np.asarray(script.pointer_start, dtype=float), quat.IDENTITY)
         self.pointer_on = any(isinstance(a, POINTER_ACTIONS) for a in script.actions)
         self.coupling: Coupling | None = None
+        self.touch_enabled = True  # free-mode touching (a session's touch switch)
         self.touch_suspended = False  # after a release, until the pointer is clear of the bones
         self.reach = bone_reach(model)
         self.haptics = HapticChain(script.max_force, script.max_torque, script.lowpass)
         self.expectations: list[ExpectResult] = []
         self.peak = self.peak_since_key = self.peak_displayed = 0.0
         self.displayed = (np.zeros(3), np.zeros(3))  # the last step's wrench on the hand
+        self._handlers: dict | None = None
 
     def run(self, actions: tuple | None = None) -> RunResult:
         """Run every action (the script's unless given), then wait out the script's duration."""
         start = time.perf_counter()
         error = None
-        handlers = self._handlers()
         try:
             for action in self.script.actions if actions is None else actions:
-                began = self.state.time
-                handlers[type(action)](action)
-                if self.on_action is not None:
-                    self.on_action(action, began)
+                self.act(action)
             if self.script.duration is not None:
                 self.advance(self.script.duration - self.state.time)
         except SimulationError as exc:
@@ -129,7 +144,16 @@ class Runner:
             self.expectations, self.peak, self.peak_displayed, error,
         )  # fmt: skip
 
-    def _handlers(self) -> dict:
+    def act(self, action: object) -> None:
+        """Carry out one action (steps the simulation for a timed one)."""
+        if self._handlers is None:
+            self._handlers = self._handler_table()
+        began = self.state.time
+        self._handlers[type(action)](action)
+        if self.on_action is not None:
+            self.on_action(action, began)
+
+    def _handler_table(self) -> dict:
         return {
             Push: lambda a: self.advance(a.duration, a),
             Wait: lambda a: self.advance(a.duration),
@@ -146,7 +170,13 @@ class Runner:
             Until: lambda a: self.advance(
                 a.time - self.state.time + 0.5 * self.model.options.h - EVENT_SLACK
             ),
+            TouchMode: self._touch_mode,
+            UndoKey: lambda a: self.keys.pop() if len(self.keys) else None,
         }
+
+    def _touch_mode(self, action: TouchMode) -> None:
+        self.touch_enabled = action.on
+        self.touch_suspended = action.on
 
     def _key(self, action: Key) -> None:
         extra = {"line": action.line, "peak_force": self.peak_since_key}
@@ -216,7 +246,10 @@ class Runner:
         self.touch_suspended = True
 
     def _touching(self, pos: np.ndarray) -> bool:
-        """Free-mode touching is on, unless suspended after a release and not yet clear."""
+        """Free-mode touching is on, unless switched off, or suspended after a release (or
+        switching on) and not yet clear."""
+        if not self.touch_enabled:
+            return False
         if self.touch_suspended:
             dist, _ = segment_distances(self.model, self.state, pos)
             gap = self.reach + self.script.pointer_radius + self.model.options.contact_margin

@@ -38,6 +38,25 @@ SPIDAR_CHANNELS = {
 }
 
 
+def wrench_message(t: float, requested: tuple, displayed: tuple) -> dict:
+    """``/haptic/wrench``: the (force, torque) the hand should feel and what it was shown."""
+    return {
+        "t": t,
+        "requested": {"force": requested[0], "torque": requested[1]},
+        "displayed": {"force": displayed[0], "torque": displayed[1]},
+    }
+
+
+def tensions_message(t: float, shown, wanted: tuple) -> dict:
+    """``/spidar/tensions``: the tension programme's tensions and displayed wrench Aᵀt for
+    the wanted (force, torque) in the device frame."""
+    return {
+        "t": t, "tensions": shown.tensions,
+        "displayed": {"force": shown.force, "torque": shown.torque},
+        "wanted": {"force": wanted[0], "torque": wanted[1]}, "converged": shown.converged,
+    }  # fmt: skip
+
+
 class RunTrace:
     """Writes every ``every``-th step (and every key) of a run."""
 
@@ -92,11 +111,7 @@ class RunTrace:
             "device": {"position": track.device_pos[k], "orientation": track.device_quat[k]},
             "world": {"position": track.world_pos[k], "orientation": track.world_quat[k]},
         })  # fmt: skip
-        self.writer.write("/spidar/tensions", s.time, {
-            "t": s.time, "tensions": shown.tensions,
-            "displayed": {"force": shown.force, "torque": shown.torque},
-            "wanted": {"force": wanted[0], "torque": wanted[1]}, "converged": shown.converged,
-        })  # fmt: skip
+        self.writer.write("/spidar/tensions", s.time, tensions_message(s.time, shown, wanted))
 
     def _device(
         self, s: State, ptr, coupling: Coupling | None, requested: tuple, displayed: tuple
@@ -108,11 +123,7 @@ class RunTrace:
             "device_position": device_from_world(ptr.pos, sc.workspace_offset, sc.workspace_scale),
             "mode": "free" if coupling is None else "grip", "bone": bone,
         })  # fmt: skip
-        self.writer.write("/haptic/wrench", s.time, {
-            "t": s.time,
-            "requested": {"force": requested[0], "torque": requested[1]},
-            "displayed": {"force": displayed[0], "torque": displayed[1]},
-        })  # fmt: skip
+        self.writer.write("/haptic/wrench", s.time, wrench_message(s.time, requested, displayed))
         segments = np.zeros((0, 2, 3))
         if coupling is not None:
             b = coupling.body

@@ -17,13 +17,17 @@ from __future__ import annotations
 import json
 import os
 import struct
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
 from mcap.exceptions import McapError
 from mcap.reader import make_reader
+from mcap.records import Channel, Message, Metadata, Schema
+from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 from zstandard import ZstdError
 
@@ -43,7 +47,8 @@ __all__ = [
     "write_session",
 ]
 
-FORMAT_VERSION = "1"
+FORMAT_VERSION = "2"  # 2 added the touch and undo buttons (docs/sessions.md)
+FORMATS_READ = ("1", "2")
 METADATA_NAME = "puppetcli.session"
 TICK = 1e-3  # s: the device's servo and pose-update period
 CHANNELS = {
@@ -110,6 +115,8 @@ class Session:
     tick_time (T,) s and counts (T, n) int64: one row per device tick (None if absent).
     pose_time (P,), pose_pos (P,3), pose_quat (P,4): poses stored directly (or None).
     events: buttons and script events in file order.
+    complete: False when the file ended abruptly (no summary: a killed recording), read as
+    far as its last whole chunk.
     """
 
     preset: DevicePreset
@@ -124,6 +131,7 @@ class Session:
     pose_quat: np.ndarray | None = None
     events: tuple[Event, ...] = ()
     source: str = "<session>"
+    complete: bool = True
 
     @property
     def end_time(self) -> float:
@@ -197,55 +205,129 @@ def write_session(path: Path, session: Session) -> None:
     messages = _messages(session)  # built (and NaN-checked) before any file is touched
     encoded = [(ns, topic, _encode(message)) for ns, _, topic, message in messages]
     topics = [t for t in CHANNELS if any(topic == t for _, topic, _ in encoded)]
-    topics = sorted(set(topics) | {"/spidar/buttons"}, key=list(CHANNELS).index)
     with atomic_path(Path(path)) as tmp, open(tmp, "wb") as f:
-        writer = Writer(f, compression=CompressionType.ZSTD, enable_data_crcs=True)
-        writer.start(profile="", library=library_name())
+        writer = SessionWriter(f, session, topics)
         try:
-            channel = {}
-            for topic in topics:
-                name = CHANNELS[topic]
-                data = json.dumps(load_schema(name), separators=(",", ":")).encode()
-                schema_id = writer.register_schema(name, "jsonschema", data)
-                channel[topic] = writer.register_channel(topic, "json", schema_id)
-            writer.add_metadata(METADATA_NAME, _metadata(session))
-            sequence = dict.fromkeys(topics, 0)
             for ns, topic, data in encoded:
-                writer.add_message(channel[topic], ns, data, ns, sequence[topic])
-                sequence[topic] += 1
+                writer.add_encoded(topic, ns, data)
         finally:
             writer.finish()
-        f.flush()
-        os.fsync(f.fileno())
+
+
+class SessionWriter:
+    """Writes a session to an open binary file as it comes: header, channels and the
+    ``puppetcli.session`` metadata first, then messages in time order (chunked, indexed,
+    zstd, data CRCs).  ``flush`` closes the chunk in progress and syncs the file, so a
+    recording killed after it still holds everything up to it (``read_session`` reads
+    such a file without its summary); ``finish`` writes the summary.
+
+    topics: the session channels to register (``/spidar/buttons`` always is); extra:
+    further topic → schema name (e.g. the haptic channels of a live recording).
+    """
+
+    def __init__(
+        self, f, session: Session, topics: Sequence[str], extra: dict[str, str] | None = None
+    ) -> None:
+        self._file = f
+        self._writer = Writer(f, compression=CompressionType.ZSTD, enable_data_crcs=True)
+        self._writer.start(profile="", library=library_name())
+        names = {t: CHANNELS[t] for t in CHANNELS if t in topics or t == "/spidar/buttons"}
+        names |= extra or {}
+        self._channel: dict[str, int] = {}
+        for topic, name in names.items():
+            data = json.dumps(load_schema(name), separators=(",", ":")).encode()
+            schema_id = self._writer.register_schema(name, "jsonschema", data)
+            self._channel[topic] = self._writer.register_channel(topic, "json", schema_id)
+        self._writer.add_metadata(METADATA_NAME, _metadata(session))
+        self._sequence = dict.fromkeys(self._channel, 0)
+
+    def add(self, topic: str, t: float, message: dict) -> None:
+        """Append one message at device time ``t`` (s; never before the previous one)."""
+        self.add_encoded(topic, _ns(t), _encode(message))
+
+    def add_encoded(self, topic: str, ns: int, data: bytes) -> None:
+        self._writer.add_message(self._channel[topic], ns, data, ns, self._sequence[topic])
+        self._sequence[topic] += 1
+
+    def count(self, topic: str) -> int:
+        """Messages written to ``topic`` so far."""
+        return self._sequence[topic]
+
+    def add_metadata(self, name: str, values: dict[str, str]) -> None:
+        self._writer.add_metadata(name, values)
+
+    def flush(self) -> None:
+        """Close the chunk in progress and push everything to the disk."""
+        self._writer.flush()
+        os.fsync(self._file.fileno())
+
+    def finish(self) -> None:
+        """Write the summary and footer and sync; the file is then complete."""
+        self._writer.finish()
+        self._file.flush()
+        os.fsync(self._file.fileno())
 
 
 # --- reading -----------------------------------------------------------------------------
 
 
 def read_session(path: Path) -> Session:
-    """Read and check a session file; raises ``SessionError`` (one line) on any problem."""
+    """Read and check a session file; raises ``SessionError`` (one line) on any problem.
+
+    A file without its summary (a recording that was killed) is read record by record up
+    to its last whole chunk; the Session then says ``complete=False``.
+    """
     path = Path(path)
     try:
         with open(path, "rb") as f:
-            reader = make_reader(f, validate_crcs=True)
-            summary = reader.get_summary()
-            if summary is None:
-                raise SessionError(f"{path}: expected an indexed MCAP file, got no summary")
-            meta = _read_metadata(path, reader)
-            _check_channels(path, summary)
-            raw = list(reader.iter_messages(log_time_order=False))
+            try:
+                meta, summary, raw = _read_indexed(path, f)
+                complete = True
+            except READ_ERRORS as exc:
+                f.seek(0)
+                meta, summary, raw = _read_records(path, f, exc)
+                complete = False
     except OSError as exc:
         raise SessionError(f"{path}: cannot read: {exc.strerror}") from exc
-    except READ_ERRORS as exc:
-        what = str(exc) or type(exc).__name__
+    _check_channels(path, summary)
+    return _build(path, meta, raw, complete)
+
+
+def _read_indexed(path: Path, f) -> tuple[dict[str, str], Any, list]:
+    reader = make_reader(f, validate_crcs=True)
+    summary = reader.get_summary()
+    if summary is None:
+        raise McapError("no summary")
+    meta = _read_metadata(path, reader.iter_metadata())
+    return meta, summary, list(reader.iter_messages(log_time_order=False))
+
+
+def _read_records(path: Path, f, first: Exception) -> tuple[dict[str, str], Any, list]:
+    """The records of a file whose end is missing, in file order, up to the first bad one."""
+    schemas, channels, metadata, raw = {}, {}, [], []
+    try:
+        for record in StreamReader(f, validate_crcs=True).records:
+            if isinstance(record, Schema):
+                schemas[record.id] = record
+            elif isinstance(record, Channel):
+                channels[record.id] = record
+            elif isinstance(record, Metadata):
+                metadata.append(record)
+            elif isinstance(record, Message) and record.channel_id in channels:
+                channel = channels[record.channel_id]
+                raw.append((schemas.get(channel.schema_id), channel, record))
+    except READ_ERRORS:
+        pass  # the cut: keep what came before it
+    if not metadata or not raw:
+        what = str(first) or type(first).__name__
         raise SessionError(
             f"{path}: expected a complete MCAP file, got a truncated or corrupt one ({what})"
-        ) from exc
-    return _build(path, meta, raw)
+        )
+    return _read_metadata(path, metadata), SimpleNamespace(schemas=schemas, channels=channels), raw
 
 
-def _read_metadata(path: Path, reader) -> dict[str, str]:
-    for record in reader.iter_metadata():
+def _read_metadata(path: Path, records) -> dict[str, str]:
+    for record in records:
         if record.name == METADATA_NAME:
             return dict(record.metadata)
     raise SessionError(
@@ -335,7 +417,13 @@ def _is_int(value: Any) -> bool:
     return isinstance(value, int) and not isinstance(value, bool)
 
 
-def _build(path: Path, meta: dict[str, str], raw: list) -> Session:
+def _build(path: Path, meta: dict[str, str], raw: list, complete: bool) -> Session:
+    version = meta.get("format", "1")
+    if version not in FORMATS_READ:
+        raise SessionError(
+            f"{path}: metadata.format: expected {' or '.join(FORMATS_READ)} (a newer puppetcli "
+            f"wrote this file), got {version!r}"
+        )
     dev = _device(path, meta)
     columns: dict[str, list] = {topic: [] for topic in CHANNELS}
     events: list[Event] = []
@@ -372,6 +460,7 @@ def _build(path: Path, meta: dict[str, str], raw: list) -> Session:
         pose_quat=quat.normalize(np.array([p["orientation"] for p in poses])) if poses else None,
         events=tuple(events),
         source=str(path),
+        complete=complete,
     )
 
 

@@ -63,6 +63,8 @@ def command(
         raise OutputError(f"{out} exists: pass --force to overwrite")
     spec = load_rig(rig)
     replay = load_replay(source, spec) if source.suffix.lower() == ".mcap" else None
+    if replay is not None and replay.warning:
+        click.echo(f"warning: {replay.warning}", err=True)
     plan = replay.script if replay is not None else load_script(source, spec)
     model = script_model(build_model(spec), plan)
     if _total_steps(model, plan) > MAX_STEPS:

@@ -9,17 +9,14 @@ from pathlib import Path
 
 import click
 
-from puppetcli.bvh_write import write_keys_bvh
 from puppetcli.errors import ScriptError
-from puppetcli.keyframes import write_keyframes
+from puppetcli.keyoutputs import write_key_outputs
 from puppetcli.outputs import prepare_outdir
-from puppetcli.render import render_keys
 from puppetcli.replay import Replay, load_replay
 from puppetcli.rigfile import load_rig
 from puppetcli.runner import Runner, RunResult, script_model
 from puppetcli.runtrace import RunTrace
 from puppetcli.script import load_script
-from puppetcli.skeleton import Skeleton
 from solver.model import build_model
 
 OUTPUTS = ["keyframes.json", "keyframes.bvh", "trace.mcap", "sheet.png", "keys"]
@@ -116,6 +113,8 @@ def command(
     """
     spec = load_rig(rig)
     replay = load_replay(script, spec) if script.suffix.lower() == ".mcap" else None
+    if replay is not None and replay.warning:
+        click.echo(f"warning: {replay.warning}", err=True)
     plan = replay.script if replay is not None else load_script(script, spec)
     model = script_model(build_model(spec), plan)
     if step is not None:
@@ -125,14 +124,10 @@ def command(
     skipped |= {"sheet.png", "keys"} if no_render else set()
     prepare_outdir(outdir, [name for name in OUTPUTS if name not in skipped], force)
     result = _run(model, plan, outdir, trace_every, no_trace, replay)
-    write_keyframes(outdir / "keyframes.json", model.name, result.keys)
-    if len(result.keys):
-        write_keys_bvh(
-            outdir / "keyframes.bvh", Skeleton.from_spec(spec), list(result.keys), order,
-            scale=scale, fps=fps, interpolate=None if interpolate == "none" else interpolate,
-        )  # fmt: skip
-    if not no_render and len(result.keys):
-        render_keys(outdir, Skeleton.from_spec(spec), list(result.keys), spec, view=view)
+    write_key_outputs(
+        outdir, spec, model.name, list(result.keys), render=not no_render, order=order, fps=fps,
+        scale=scale, interpolate=None if interpolate == "none" else interpolate, view=view,
+    )  # fmt: skip
     _report(result, model.options.h)
     if result.error is not None:
         raise result.error

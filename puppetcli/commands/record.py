@@ -12,7 +12,7 @@ from puppetcli.record import record_session
 from puppetcli.rigfile import load_rig
 from puppetcli.script import load_script
 from puppetcli.session import write_session
-from puppetcli.spidar import DeviceError, DevicePreset, preset, preset_from_yaml
+from puppetcli.spidar import preset_from_option
 
 DEFAULT_DEVICE = "SpidarG6X3R"
 
@@ -56,7 +56,9 @@ def command(
         raise OutputError(f"{out} exists: pass --force to overwrite")
     spec = load_rig(rig)
     plan = load_script(script, spec)
-    session = record_session(spec, plan, _device(device), noise, seed, store_pose=with_pose)
+    session = record_session(
+        spec, plan, preset_from_option(device), noise, seed, store_pose=with_pose
+    )
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
@@ -70,12 +72,3 @@ def command(
         f"{session.preset.name}, {len(session.events)} events; workspace offset [{offset}] m, "
         f"scale {ws.scale:g} ({how})"
     )
-
-
-def _device(text: str) -> DevicePreset:
-    path = Path(text)
-    if path.suffix.lower() in (".yaml", ".yml"):
-        if not path.is_file():
-            raise DeviceError(f"{text}: expected a device preset file, got no such file")
-        return preset_from_yaml(path)
-    return preset(text)

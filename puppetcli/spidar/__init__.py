@@ -12,7 +12,12 @@ Frames, tables and the maths: docs/spidar.md.
 
 from puppetcli.spidar.errors import DeviceError
 from puppetcli.spidar.estimator import EstimatorSettings, PoseEstimator, Track
-from puppetcli.spidar.presetfile import preset_from_text, preset_from_yaml, preset_to_yaml
+from puppetcli.spidar.presetfile import (
+    preset_from_option,
+    preset_from_text,
+    preset_from_yaml,
+    preset_to_yaml,
+)
 from puppetcli.spidar.presets import DevicePreset, preset, preset_names
 from puppetcli.spidar.strings import (
     StringState,
@@ -49,6 +54,7 @@ __all__ = [
     "lengths_from_pose",
     "motor_volts",
     "preset",
+    "preset_from_option",
     "preset_from_text",
     "preset_from_yaml",
     "preset_names",

@@ -23,15 +23,25 @@ import numpy as np
 from scipy.spatial import QhullError
 
 from puppetcli.spidar.errors import DeviceError
-from puppetcli.spidar.presets import DevicePreset
+from puppetcli.spidar.presets import DevicePreset, preset
 from puppetcli.spidar.strings import MIN_LENGTH, structure_matrix
 from puppetcli.yamldoc import Node, load_file, load_text
 from solver import quat
 
-__all__ = ["preset_from_text", "preset_from_yaml", "preset_to_yaml"]
+__all__ = ["preset_from_option", "preset_from_text", "preset_from_yaml", "preset_to_yaml"]
 
 TOP_KEYS = ("name", "source", "tension", "strings")
 STRING_KEYS = ("motor", "attach", "metres_per_count", "volts_per_newton")
+
+
+def preset_from_option(text: str) -> DevicePreset:
+    """A ``--device`` value: a preset YAML file (``.yaml``/``.yml``) or a built-in name."""
+    path = Path(text)
+    if path.suffix.lower() in (".yaml", ".yml"):
+        if not path.is_file():
+            raise DeviceError(f"{text}: expected a device preset file, got no such file")
+        return preset_from_yaml(path)
+    return preset(text)
 
 
 def preset_from_yaml(path: str | Path) -> DevicePreset:

@@ -211,10 +211,27 @@ def bad(tmp_path: Path, path: Path) -> str:
     return message[len(f"{path}: ") :]
 
 
-def test_truncated_session(tmp_path):
+def test_a_session_that_ended_abruptly_replays_what_it_holds(tmp_path):
+    """A recording killed before its summary: everything up to its last whole chunk is
+    replayed (here all of it: only the summary and footer are cut), with a warning."""
     good = write_raw(tmp_path / "good.mcap", ticks() + KEY)
     cut = tmp_path / "cut.mcap"
     cut.write_bytes(good.read_bytes()[:-100])
+    assert not read_session(cut).complete and read_session(good).complete
+    result = run("pose", DOLL, cut, "-o", tmp_path / "out", "--no-render")
+    assert result.exit_code == 0, result.output
+    assert f"warning: {cut}: the recording ended abruptly" in result.stderr
+    run("pose", DOLL, good, "-o", tmp_path / "full", "--no-render")
+    _, keys = read_keyframes(tmp_path / "out" / "keyframes.json")
+    _, full = read_keyframes(tmp_path / "full" / "keyframes.json")
+    assert [k.time for k in keys] == [k.time for k in full] and len(keys) == 1
+    assert keys[0].bones == full[0].bones
+
+
+def test_a_file_cut_before_its_first_chunk(tmp_path):
+    good = write_raw(tmp_path / "good.mcap", ticks() + KEY)
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(good.read_bytes()[:300])  # header and metadata, no whole chunk
     assert bad(tmp_path, cut).startswith("expected a complete MCAP file, got a truncated")
 
 
