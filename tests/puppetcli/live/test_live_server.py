@@ -1,0 +1,215 @@
+"""`puppetcli live`'s server without a browser, as a process: the token, the Origin and the
+Host are checked; oversized, malformed and flooding messages are rejected and counted and
+never stop the session; a port in use is one error line; Ctrl-C, a closed page and a kill
+all leave a session that replays."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import re
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import aiohttp
+import pytest
+from click.testing import CliRunner
+
+from puppetcli.cli import cli
+from puppetcli.keyframes import read_keyframes
+from puppetcli.live.server import GRACE
+
+ROOT = Path(__file__).resolve().parents[3]
+DOLL = ROOT / "rigs/doll.yaml"
+
+
+class Live:
+    """A `puppetcli live` process on a free port, with its URL."""
+
+    def __init__(self, session: Path, *extra: str) -> None:
+        args = [sys.executable, "-m", "puppetcli", "live", str(DOLL), "-o", str(session),
+                "--no-open", "--port", "0", *extra]  # fmt: skip
+        self.proc = subprocess.Popen(
+            args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        )
+        line = self.proc.stdout.readline()
+        found = re.search(r"(http://(\S+))/\?token=(\S+)", line)
+        assert found, line + self.proc.stderr.read()
+        self.base, self.host, self.token = found.groups()
+        self.ws_url = self.base.replace("http://", "ws://") + "/ws?token=" + self.token
+
+    def finish(self, sig=signal.SIGINT, timeout: float = 60.0) -> tuple[int, str, str]:
+        if sig is not None:
+            self.proc.send_signal(sig)
+        out, err = self.proc.communicate(timeout=timeout)
+        return self.proc.returncode, out, err
+
+
+async def frames_until(ws, predicate, limit: float = 10.0) -> dict:
+    """Read messages until a frame satisfies ``predicate``; returns it."""
+    end = time.monotonic() + limit
+    while time.monotonic() < end:
+        msg = await ws.receive(timeout=limit)
+        if msg.type != aiohttp.WSMsgType.TEXT:
+            raise AssertionError(f"socket ended: {msg.type} {msg.data} {msg.extra}")
+        data = json.loads(msg.data)
+        if data["type"] == "frame" and predicate(data):
+            return data
+    raise AssertionError("no such frame in time")
+
+
+@pytest.fixture(scope="module")
+def live(tmp_path_factory):
+    server = Live(tmp_path_factory.mktemp("live") / "s.mcap")
+    yield server
+    if server.proc.poll() is None:
+        server.finish()
+
+
+def test_the_page_and_the_socket_need_the_token_the_origin_and_a_loopback_host(live):
+    async def check():
+        async with aiohttp.ClientSession() as http:
+            page = f"{live.base}/?token={live.token}"
+            async with http.get(page) as r:
+                assert r.status == 200 and "three" in (await r.text())
+            for bad in (f"{live.base}/", f"{live.base}/?token=wrong"):
+                async with http.get(bad) as r:
+                    assert r.status == 403
+            async with http.get(page, headers={"Host": "evil.example:80"}) as r:
+                assert r.status == 403  # DNS rebinding: a foreign name for our address
+            async with http.get(f"{live.base}/static/vendor/three/LICENSE") as r:
+                assert r.status == 200 and "MIT" in await r.text()
+            async with http.get(f"{live.base}/static/../../session.py") as r:
+                assert r.status in (403, 404)
+            wrong = [
+                (live.ws_url.replace(live.token, "wrong"), live.base),
+                (live.ws_url, "http://evil.example"),
+                (live.ws_url, None),
+            ]
+            for url, origin in wrong:
+                with pytest.raises(aiohttp.WSServerHandshakeError) as info:
+                    await http.ws_connect(url, origin=origin)
+                assert info.value.status == 403
+            async with http.ws_connect(live.ws_url, origin=live.base) as ws:
+                hello = json.loads((await ws.receive()).data)
+                assert hello["type"] == "hello" and hello["rig"] == "doll"
+
+    asyncio.run(check())
+
+
+def test_bad_messages_are_rejected_counted_and_harmless(live):
+    async def check():
+        async with aiohttp.ClientSession() as http:
+            async with http.ws_connect(live.ws_url, origin=live.base) as ws:
+                first = json.loads((await ws.receive()).data)["frame"]
+                bad = [
+                    "{", "[]", '{"type":"pointer","pos":[NaN,0,0],"quat":[1,0,0,0]}',
+                    '{"type":"grip","bone":"nobody","point":[0,0,0]}', '{"type":"rm -rf"}',
+                ]  # fmt: skip
+                for text in bad * 4:
+                    await ws.send_str(text)
+                await ws.send_bytes(b"\x00\x01")
+                frame = await frames_until(ws, lambda f: f["stats"]["rejected"] >= 21)
+                assert frame["stats"]["rejected"] == first["stats"]["rejected"] + 21
+                assert frame["t"] > first["t"] and frame["grip"] is None
+                for _ in range(1000):  # a flood beyond the rate limit
+                    await ws.send_str('{"type":"ping","t":1}')
+                frame = await frames_until(ws, lambda f: f["stats"]["rejected"] > 21)
+                assert all(x == x for x in frame["body_pos"])  # no NaN reached the doll
+            async with http.ws_connect(live.ws_url, origin=live.base) as ws:
+                await ws.receive()
+                await ws.send_str("x" * 5000)  # over the size limit: the socket is closed
+                msg = await ws.receive()
+                while msg.type == aiohttp.WSMsgType.TEXT:
+                    msg = await ws.receive()
+                assert msg.type in (aiohttp.WSMsgType.CLOSE, aiohttp.WSMsgType.CLOSED)
+                assert ws.close_code == 1009  # message too big
+            async with http.ws_connect(live.ws_url, origin=live.base) as ws:
+                assert json.loads((await ws.receive()).data)["type"] == "hello"  # still serving
+
+    asyncio.run(check())
+
+
+def test_ctrl_c_completes_the_session_and_its_outputs(live, tmp_path):
+    async def pose():
+        async with (
+            aiohttp.ClientSession() as http,
+            http.ws_connect(live.ws_url, origin=live.base) as ws,
+        ):
+            await ws.receive()
+            await ws.send_str(json.dumps({"type": "key", "seq": 1, "label": "first"}))
+            await frames_until(ws, lambda f: f["ack"] >= 1)
+
+    asyncio.run(pose())
+    code, out, err = live.finish(signal.SIGINT)
+    assert code == 0, err
+    session = Path(re.search(r"session (\S+):", out).group(1))
+    assert "(interrupted)" in out and (session.with_suffix("") / "keyframes.json").exists()
+    result = CliRunner().invoke(cli, ["pose", str(DOLL), str(session), "-o", str(tmp_path / "r"),
+                                      "--no-render"])  # fmt: skip
+    assert result.exit_code == 0 and "ended abruptly" not in result.output
+    live_keys = read_keyframes(session.with_suffix("") / "keyframes.json")[1]
+    keys = read_keyframes(tmp_path / "r" / "keyframes.json")[1]
+    assert [k.label for k in keys] == [k.label for k in live_keys] == ["first"]
+
+
+def test_a_port_in_use_is_one_error_line(tmp_path):
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        result = subprocess.run(
+            [sys.executable, "-m", "puppetcli", "live", str(DOLL), "-o", str(tmp_path / "s.mcap"),
+             "--no-open", "--port", str(port)], capture_output=True, text=True, timeout=60,
+        )  # fmt: skip
+    assert result.returncode == 1
+    assert result.stderr.strip() == (
+        f"error: 127.0.0.1:{port} is in use by another program: pick another --port "
+        "(0 = any free port)"
+    )
+    assert not (tmp_path / "s.mcap").exists()
+
+
+def test_a_killed_session_replays_what_was_flushed(tmp_path):
+    server = Live(tmp_path / "k.mcap")
+
+    async def pose():
+        async with (
+            aiohttp.ClientSession() as http,
+            http.ws_connect(server.ws_url, origin=server.base) as ws,
+        ):
+            await ws.receive()
+            await ws.send_str(json.dumps({"type": "key", "seq": 1, "label": "kept"}))
+            await frames_until(ws, lambda f: f["ack"] >= 1)
+            await asyncio.sleep(1.6)  # the session is flushed every second
+
+    asyncio.run(pose())
+    code, _, _ = server.finish(signal.SIGKILL)
+    assert code == -signal.SIGKILL
+    result = CliRunner().invoke(cli, ["pose", str(DOLL), str(tmp_path / "k.mcap"), "-o",
+                                      str(tmp_path / "r"), "--no-render"])  # fmt: skip
+    assert result.exit_code == 0, result.output
+    assert "the recording ended abruptly" in result.stderr
+    assert [k.label for k in read_keyframes(tmp_path / "r" / "keyframes.json")[1]] == ["kept"]
+
+
+def test_closing_the_last_page_stops_the_session(tmp_path):
+    server = Live(tmp_path / "c.mcap")
+
+    async def visit():
+        async with (
+            aiohttp.ClientSession() as http,
+            http.ws_connect(server.ws_url, origin=server.base) as ws,
+        ):
+            await ws.receive()
+
+    asyncio.run(visit())
+    started = time.monotonic()
+    code, out, err = server.finish(sig=None, timeout=GRACE + 30)
+    assert code == 0, err
+    assert "(page closed)" in out and time.monotonic() - started >= GRACE - 1.0
+    assert (tmp_path / "c" / "keyframes.json").exists()
