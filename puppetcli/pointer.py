@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from solver import quat
+from solver import quat, quat1
 from solver.grip import Pointer
 
 
@@ -51,8 +51,8 @@ def pointer_over_step(motion: Motion, t: float, h: float, radius: float) -> Poin
     """The solver's Pointer for the step [t, t + h]: pose at its end, mean velocity over it."""
     p0, q0 = motion.pose(t)
     p1, q1 = motion.pose(t + h)
-    omega = quat.log(quat.mul(q1, quat.conj(q0))) / h
-    return Pointer(p1, q1, (p1 - p0) / h, omega, radius)
+    turn = quat1.log(quat1.mul(tuple(q1.tolist()), quat1.conj(tuple(q0.tolist()))))
+    return Pointer(p1, q1, (p1 - p0) / h, np.array(turn) / h, radius)
 
 
 def device_from_world(pos: np.ndarray, offset: np.ndarray, scale: float) -> np.ndarray:

@@ -43,7 +43,7 @@ from puppetcli.spidar import (
 )
 from puppetcli.spidar.strings import MIN_LENGTH
 from puppetcli.yamldoc import did_you_mean
-from solver import quat
+from solver import quat, quat1
 from solver.model import Model
 from solver.spec import RigSpec
 from solver.state import StepInput, StepReport
@@ -335,8 +335,8 @@ class SessionRunner(Runner):
             return
         track, ws = self.replay.track, self.replay.session.workspace
         k = track.index(self.state.time)
-        to_device = quat.conj(ws.orientation)
-        wanted = tuple(quat.rotate(to_device, v) for v in self.displayed)
+        to_device = quat1.conj(tuple(ws.orientation.tolist()))
+        wanted = tuple(np.array(quat1.rotate(to_device, tuple(v.tolist()))) for v in self.displayed)
         self.tensions = self.distributor.display(track.device_pos[k], track.device_quat[k], *wanted)
         if self.trace is not None:
             self.trace.spidar(self.state, track, k, self.tensions, wanted)

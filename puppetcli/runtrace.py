@@ -42,18 +42,24 @@ def wrench_message(t: float, requested: tuple, displayed: tuple) -> dict:
     """``/haptic/wrench``: the (force, torque) the hand should feel and what it was shown."""
     return {
         "t": t,
-        "requested": {"force": requested[0], "torque": requested[1]},
-        "displayed": {"force": displayed[0], "torque": displayed[1]},
+        "requested": {"force": _list(requested[0]), "torque": _list(requested[1])},
+        "displayed": {"force": _list(displayed[0]), "torque": _list(displayed[1])},
     }
+
+
+def _list(v) -> list[float]:
+    """A vector as the list JSON writes (cheaper than the encoders' numpy fallback)."""
+    return v.tolist() if isinstance(v, np.ndarray) else list(v)
 
 
 def tensions_message(t: float, shown, wanted: tuple) -> dict:
     """``/spidar/tensions``: the tension programme's tensions and displayed wrench Aᵀt for
     the wanted (force, torque) in the device frame."""
     return {
-        "t": t, "tensions": shown.tensions,
-        "displayed": {"force": shown.force, "torque": shown.torque},
-        "wanted": {"force": wanted[0], "torque": wanted[1]}, "converged": shown.converged,
+        "t": t, "tensions": _list(shown.tensions),
+        "displayed": {"force": _list(shown.force), "torque": _list(shown.torque)},
+        "wanted": {"force": _list(wanted[0]), "torque": _list(wanted[1])},
+        "converged": bool(shown.converged),
     }  # fmt: skip
 
 

@@ -83,6 +83,12 @@ SOLVER_CHOICES = [*SOLVERS, "reference"]
     is_flag=True,
     help="Measure each skip of unneeded work on and off instead (puppetcli/bench_skips.py).",
 )
+@click.option(
+    "--live",
+    is_flag=True,
+    help="Measure `puppetcli live`'s loop instead: real-time factor, headroom and "
+    "input-to-frame latency with a scripted page (--h defaults to 1 and 5 ms here).",
+)
 @click.option("--quick", is_flag=True, help="With --precision: fewer settings and steps (CI).")
 @click.option(
     "--out",
@@ -100,6 +106,7 @@ def command(
     peers: bool,
     precision: bool,
     skips: bool,
+    live: bool,
     quick: bool,
     out_dir: Path | None,
 ) -> None:
@@ -126,6 +133,13 @@ def command(
     and hybrid (15/50 sweeps) at h = 1, 5, 20 ms on the compiled step, with a verdict
     per scene against the paper's setting (PGS 15, warm start) at equal run time.
     """
+    if live:
+        from puppetcli.bench_live import format_live, measure_live
+
+        source = click.get_current_context().get_parameter_source("steps_h")
+        default = source == click.core.ParameterSource.DEFAULT
+        click.echo(format_live(measure_live([0.001, 0.005] if default else list(steps_h))))
+        return
     if skips:
         from puppetcli.bench_skips import format_skips, measure_skips
 

@@ -4,7 +4,8 @@ Each display frame asks how many steps are due: the simulated time should equal 
 wall time elapsed since the clock was anchored (at start and at every resume).  When
 the steps of a frame cannot be done within the frame's budget, or the simulation lags
 the wall by more than ``MAX_LAG``, the clock drops the backlog (re-anchors) and reports
-itself behind: the doll then moves slower than real time, visibly, instead of in
+itself behind (for a ``WINDOW`` after a drop, and whenever the measured real-time factor
+is under ``SLOW``): the doll then moves slower than real time, visibly, instead of in
 bursts.  ``rtf`` (simulated seconds per wall second) and ``headroom`` (how many times
 faster than real time the steps themselves run) are measured over the last ``WINDOW``.
 """
@@ -18,6 +19,7 @@ __all__ = ["MAX_LAG", "RealTimeClock"]
 
 MAX_LAG = 0.2  # s: a larger lag is dropped rather than caught up
 WINDOW = 1.0  # s of wall time the rates are measured over
+SLOW = 0.95  # a real-time factor under this (over a full window) is behind
 
 
 class RealTimeClock:
@@ -26,7 +28,7 @@ class RealTimeClock:
     def __init__(self, h: float, now: float, sim_time: float = 0.0) -> None:
         self.h = h
         self.paused = False
-        self.behind = False
+        self._dropped = -math.inf  # wall time of the last dropped backlog
         self._anchor(now, sim_time)
         self._samples: deque[tuple[float, float, float, int]] = deque()  # wall, sim, busy, n
 
@@ -39,20 +41,26 @@ class RealTimeClock:
             return 0
         lag = self._sim0 + (now - self._wall0) - sim_time
         if lag > MAX_LAG:
-            self.behind = True
+            self._dropped = now
             self._anchor(now - MAX_LAG, sim_time)
             lag = MAX_LAG
         return max(0, math.floor(lag / self.h + 1e-9))
 
-    def done(self, now: float, sim_time: float, busy: float, steps: int, short: bool) -> None:
-        """Report a frame's work: ``steps`` taken in ``busy`` s; ``short``: fewer than due."""
-        self.behind = short or (self.behind and self._lagging(now, sim_time))
+    def done(self, now: float, sim_time: float, busy: float, steps: int) -> None:
+        """Report a frame's work: ``steps`` taken in ``busy`` s."""
         self._samples.append((now, sim_time, busy, steps))
         while len(self._samples) > 2 and now - self._samples[1][0] >= WINDOW:
             self._samples.popleft()
 
-    def _lagging(self, now: float, sim_time: float) -> bool:
-        return self._sim0 + (now - self._wall0) - sim_time > 2.0 * self.h
+    @property
+    def behind(self) -> bool:
+        """The physics did not keep up: a backlog dropped within the window, or a real-time
+        factor under ``SLOW`` over a full window."""
+        if self.paused or not self._samples:
+            return False
+        now = self._samples[-1][0]
+        full = now - self._samples[0][0] >= 0.9 * WINDOW
+        return now - self._dropped < WINDOW or (full and self.rtf < SLOW)
 
     def pause(self, on: bool, now: float, sim_time: float) -> None:
         if self.paused and not on:

@@ -213,7 +213,7 @@ class LiveServer:
         except SimulationError as exc:
             self._stop("error", exc)
         end = time.perf_counter()
-        self.clock.done(end, self.live.time, end - start, taken, taken < due)
+        self.clock.done(end, self.live.time, end - start, taken)
         if _key_list(self.live) != keys_before:
             self._broadcast(self._keys())
 

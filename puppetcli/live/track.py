@@ -10,7 +10,7 @@ Each tick is recorded as the session's ``/spidar/pose`` (device frame) and appen
 ``LiveTrack``, the growing twin of a replay's ``DeviceTrack``: the world pose of a tick
 is computed from the recorded device pose by the same operations the session reader and
 ``Workspace.world_from_device`` apply, so a replay sees exactly the poses the live run
-used.
+used (``solver.quat1``: numpy's operations on one pose, in Python floats).
 """
 
 from __future__ import annotations
@@ -21,6 +21,7 @@ import numpy as np
 
 from puppetcli.replay import TrackLookup
 from puppetcli.session import TICK, Workspace
+from solver import quat1
 
 __all__ = ["SMOOTHING", "LiveTrack", "PointerFilter", "device_from_world"]
 
@@ -45,7 +46,7 @@ class LiveTrack(TrackLookup):
         if self._n == len(self._time):
             self._grow()
         k = self._n
-        q = _normalize(device_quat)  # as the session reader does
+        q = quat1.normalize(device_quat)  # as the session reader does
         world_pos, world_quat = _world_from_device(self.workspace, device_pos, q)
         self._time[k], self._dev_pos[k], self._dev_quat[k] = t, device_pos, q
         self._pos[k], self._quat[k] = world_pos, world_quat
@@ -97,67 +98,30 @@ class PointerFilter:
         self.pos, self.quat = tuple(map(float, pos)), tuple(map(float, q))
 
 
-# Scalar quaternion algebra for one pose a tick: numpy's per-call cost (~20 µs for one
-# ``quat.mul``) would make the ticks most of a live step.  The operations and their order
-# are those of ``solver.quat`` (``mul``, ``rotate``, ``normalize``), so the results are
-# the same floats (tests/puppetcli/live/test_track.py checks them bit for bit).
-
-
-def _mul(a: tuple, b: tuple) -> tuple:
-    aw, ax, ay, az = a
-    bw, bx, by, bz = b
-    return (
-        aw * bw - ax * bx - ay * by - az * bz,
-        aw * bx + ax * bw + ay * bz - az * by,
-        aw * by - ax * bz + ay * bw + az * bx,
-        aw * bz + ax * by - ay * bx + az * bw,
-    )
-
-
-def _conj(q: tuple) -> tuple:
-    return (q[0], -q[1], -q[2], -q[3])
-
-
-def _cross(a: tuple, b: tuple) -> tuple:
-    return (a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0])
-
-
-def _rotate(q: tuple, v: tuple) -> tuple:
-    w, u = q[0], q[1:]
-    t = tuple(2.0 * c for c in _cross(u, v))
-    c = _cross(u, t)
-    return tuple(v[i] + w * t[i] + c[i] for i in range(3))
-
-
-def _normalize(q: tuple) -> tuple:
-    n = math.sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3])
-    return tuple(c / n for c in q)
-
-
 def _slerp(q0: tuple, q1: tuple, a: float) -> tuple:
     """The rotation a of the way from q0 to q1 (shortest arc), normalised."""
-    d = _mul(q1, _conj(q0))
+    d = quat1.mul(q1, quat1.conj(q0))
     if d[0] < 0.0:
         d = tuple(-c for c in d)
     s = math.sqrt(d[1] * d[1] + d[2] * d[2] + d[3] * d[3])
     if s < 1e-12:
-        return _normalize(q1)
+        return quat1.normalize(q1)
     half = a * math.atan2(s, d[0])
     k = math.sin(half) / s
-    return _normalize(_mul((math.cos(half), k * d[1], k * d[2], k * d[3]), q0))
+    return quat1.normalize(quat1.mul((math.cos(half), k * d[1], k * d[2], k * d[3]), q0))
 
 
 def device_from_world(ws: Workspace, pos: tuple, q: tuple) -> tuple[tuple, tuple]:
     """``Workspace.device_from_world`` of one pose."""
-    r_inv = _conj(tuple(map(float, ws.orientation)))
+    r_inv = quat1.conj(tuple(map(float, ws.orientation)))
     off, scale = ws.offset, float(ws.scale)
-    device = _rotate(r_inv, tuple((pos[i] - float(off[i])) / scale for i in range(3)))
-    return device, _mul(_mul(r_inv, q), tuple(map(float, ws.orientation)))
+    device = quat1.rotate(r_inv, tuple((pos[i] - float(off[i])) / scale for i in range(3)))
+    return device, quat1.mul(quat1.mul(r_inv, q), tuple(map(float, ws.orientation)))
 
 
 def _world_from_device(ws: Workspace, pos: tuple, q: tuple) -> tuple[tuple, tuple]:
     """``Workspace.world_from_device`` of one pose."""
     r = tuple(map(float, ws.orientation))
-    moved = _rotate(r, pos)
+    moved = quat1.rotate(r, pos)
     world = tuple(float(ws.offset[i]) + float(ws.scale) * moved[i] for i in range(3))
-    return world, _mul(_mul(r, q), _conj(r))
+    return world, quat1.mul(quat1.mul(r, q), quat1.conj(r))

@@ -6,7 +6,7 @@ The structure of Springhead's ``QuadProgram.h`` (K. Akahane, S. Hasegawa): each 
 is free or held at its lower or upper bound (the working set).  One iteration:
 
 1. solve the equality problem on the free variables with the others at their bounds:
-   Q_FF x_F = c_F − Q_FB x_B;
+   Q_FF x_F = c_F − Q_FB x_B (Cholesky: Q_FF is positive definite);
 2. if that point is feasible, move there; then check the multipliers of the held
    variables, g = Qx − c: a variable at its lower bound is optimal when g_i ≥ 0, at its
    upper bound when g_i ≤ 0.  If all hold, x is the exact optimum (KKT); otherwise
@@ -24,6 +24,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 __all__ = ["BoxQPResult", "solve_box_qp"]
 
@@ -41,31 +42,83 @@ class BoxQPResult:
     converged: bool
 
 
-def _equality_point(q: np.ndarray, c: np.ndarray, x: np.ndarray, free: np.ndarray) -> np.ndarray:
+@njit(cache=True)
+def _cholesky_solve(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """x with a x = b for a small symmetric positive definite a (Cholesky, in place)."""
+    n = len(b)
+    for j in range(n):
+        for k in range(j):
+            a[j, j] -= a[j, k] * a[j, k]
+        a[j, j] = np.sqrt(a[j, j])
+        for i in range(j + 1, n):
+            for k in range(j):
+                a[i, j] -= a[i, k] * a[j, k]
+            a[i, j] /= a[j, j]
+    x = b.copy()
+    for i in range(n):
+        for k in range(i):
+            x[i] -= a[i, k] * x[k]
+        x[i] /= a[i, i]
+    for i in range(n - 1, -1, -1):
+        for k in range(i + 1, n):
+            x[i] -= a[k, i] * x[k]
+        x[i] /= a[i, i]
+    return x
+
+
+@njit(cache=True)
+def _equality_point(q: np.ndarray, c: np.ndarray, x: np.ndarray, working: np.ndarray):
     """Minimiser over the free variables with the held ones fixed at x."""
     target = x.copy()
-    if np.any(free):
-        held = ~free
-        rhs = c[free] - q[np.ix_(free, held)] @ x[held]
-        target[free] = np.linalg.solve(q[np.ix_(free, free)], rhs)
+    free = np.flatnonzero(working == FREE)
+    m = len(free)
+    if m == 0:
+        return target
+    a, rhs = np.empty((m, m)), np.empty(m)
+    for r in range(m):
+        i = free[r]
+        rhs[r] = c[i]
+        for j in range(len(x)):
+            if working[j] != FREE:
+                rhs[r] -= q[i, j] * x[j]
+        for s in range(m):
+            a[r, s] = q[i, free[s]]
+    sol = _cholesky_solve(a, rhs)
+    for r in range(m):
+        target[free[r]] = sol[r]
     return target
 
 
-def _ratio_step(
-    x: np.ndarray, d: np.ndarray, lo: np.ndarray, hi: np.ndarray, free: np.ndarray
-) -> tuple[float, int, int]:
-    """Largest step α ≤ 1 along d keeping x feasible: (α, blocking index or −1, its bound)."""
-    alpha, index, bound = 1.0, -1, FREE
-    for i in np.nonzero(free)[0]:
-        if d[i] < 0.0:
-            step, side = (lo[i] - x[i]) / d[i], AT_LOWER
-        elif d[i] > 0.0:
-            step, side = (hi[i] - x[i]) / d[i], AT_UPPER
-        else:
+@njit(cache=True)
+def _active_set(q, c, lo, hi, x, working, cap: int, scale: float) -> tuple[int, bool]:
+    """The iterations of the module docstring on x and working (in place)."""
+    n = len(c)
+    for it in range(1, cap + 1):
+        d = _equality_point(q, c, x, working) - x
+        alpha, index, side = 1.0, -1, FREE
+        for i in range(n):  # the largest feasible step (ratio test over the free variables)
+            if working[i] != FREE or d[i] == 0.0:
+                continue
+            bound, kind = (lo[i], AT_LOWER) if d[i] < 0.0 else (hi[i], AT_UPPER)
+            step = (bound - x[i]) / d[i]
+            if step < alpha:
+                alpha, index, side = max(step, 0.0), i, kind
+        if index >= 0:
+            x += alpha * d
+            x[index] = lo[index] if side == AT_LOWER else hi[index]
+            working[index] = side
             continue
-        if step < alpha:
-            alpha, index, bound = max(step, 0.0), int(i), side
-    return alpha, index, bound
+        x[:] = np.minimum(np.maximum(x + d, lo), hi)
+        g = q @ x - c
+        worst, most = -1, -np.inf
+        for i in range(n):
+            v = -g[i] if working[i] == AT_LOWER else (g[i] if working[i] == AT_UPPER else 0.0)
+            if v > most:
+                worst, most = i, v
+        if most <= scale:
+            return it, True
+        working[worst] = FREE
+    return cap, False
 
 
 def _start(
@@ -92,26 +145,14 @@ def solve_box_qp(
     """Minimise ½ xᵀQx − cᵀx on lo ≤ x ≤ hi (see the module docstring).
 
     ``max_iterations`` None runs to convergence (capped at 50·n as a safety net);
-    ``tol`` is relative to the problem's scale for the multiplier signs.
+    ``tol`` is relative to the problem's scale for the multiplier signs.  The iterations
+    are compiled (numba): a live session solves one QP a physics step.
     """
     n = len(c)
     x, working = _start(lo, hi, x0, working0)
     cap = 50 * n if max_iterations is None else max_iterations
     scale = tol * (1.0 + float(np.max(np.abs(c))) + float(np.max(np.abs(q))) * float(np.max(hi)))
-    for it in range(1, cap + 1):
-        free = working == FREE
-        d = _equality_point(q, c, x, free) - x
-        alpha, index, side = _ratio_step(x, d, lo, hi, free)
-        if index >= 0:
-            x = x + alpha * d
-            x[index] = lo[index] if side == AT_LOWER else hi[index]
-            working[index] = side
-            continue
-        x = np.clip(x + d, lo, hi)
-        g = q @ x - c
-        violation = np.where(working == AT_LOWER, -g, np.where(working == AT_UPPER, g, 0.0))
-        worst = int(np.argmax(violation))
-        if violation[worst] <= scale:
-            return BoxQPResult(x, working, it, True)
-        working[worst] = FREE
-    return BoxQPResult(x, working, cap, False)
+    q, c = np.ascontiguousarray(q, dtype=float), np.ascontiguousarray(c, dtype=float)
+    lo, hi = np.ascontiguousarray(lo, dtype=float), np.ascontiguousarray(hi, dtype=float)
+    iterations, converged = _active_set(q, c, lo, hi, x, working, cap, scale)
+    return BoxQPResult(x, working, iterations, converged)

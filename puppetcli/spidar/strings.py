@@ -23,6 +23,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from puppetcli.spidar.errors import DeviceError
 from puppetcli.spidar.presets import DevicePreset
@@ -63,11 +64,26 @@ class StringState:
 
 def strings_at(preset: DevicePreset, pos: np.ndarray, q: np.ndarray) -> StringState:
     """Directions, lengths and moments of every string for one grip pose (p, q)."""
-    attach = quat.rotate(np.asarray(q, dtype=float), preset.grip_attach)
-    d = preset.motor_pos - (np.asarray(pos, dtype=float) + attach)
-    length = np.linalg.norm(d, axis=1)
-    u = d / length[:, None]
-    return StringState(attach, u, length, quat.cross(attach, u))
+    p, q = np.asarray(pos, dtype=float), np.asarray(q, dtype=float)
+    return StringState(*_strings(preset.motor_pos, preset.grip_attach, p, q))
+
+
+@njit(cache=True)
+def _strings(motor: np.ndarray, attach_local: np.ndarray, p: np.ndarray, q: np.ndarray):
+    """(r, u, l, w) of the module docstring for one pose: compiled, since a replay or a live
+    session asks once a physics step (numpy's dozen small calls cost ~60 µs)."""
+    n = len(motor)
+    attach, u, length, moment = np.empty((n, 3)), np.empty((n, 3)), np.empty(n), np.empty((n, 3))
+    w, qv = q[0], q[1:]
+    for i in range(n):
+        a = attach_local[i]
+        t = 2.0 * np.cross(qv, a)
+        r = a + w * t + np.cross(qv, t)
+        d = motor[i] - (p + r)
+        length[i] = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+        attach[i], u[i] = r, d / length[i]
+        moment[i] = np.cross(r, u[i])
+    return attach, u, length, moment
 
 
 def structure_matrix(preset: DevicePreset, pos: np.ndarray, q: np.ndarray) -> np.ndarray:
