@@ -301,3 +301,28 @@ def test_grip_without_bone_needs_a_bone_within_reach(tmp_path):
     path = write_raw(tmp_path / "g.mcap", ticks() + grip)
     message = one_error(run("pose", DOLL, path, "-o", tmp_path / "out", "--no-render"))
     assert message.startswith(f"{path}: /spidar/buttons grip at t = 0.010 s: expected a bone")
+
+
+def test_undo_drops_the_last_key_and_labels_count_every_key(tmp_path):
+    def press(t, button, **extra):
+        return ("/spidar/buttons", t, {"button": button, "state": "down", **extra})
+
+    events = [press(0.01, "key"), press(0.02, "key", label="b"), press(0.03, "undo"),
+              press(0.04, "key"), press(0.05, "undo"), press(0.05, "undo")]  # fmt: skip
+    path = write_raw(tmp_path / "undo.mcap", ticks() + events)
+    result = run("pose", DOLL, path, "-o", tmp_path / "out", "--no-render")
+    assert result.exit_code == 0, result.output
+    _, keys = read_keyframes(tmp_path / "out" / "keyframes.json")
+    # key 1, b (undone), key 3 (undone), then an undo with one key left: key 1 goes too
+    assert [k.label for k in keys] == []
+    path = write_raw(tmp_path / "undo2.mcap", ticks() + events[:4])
+    run("pose", DOLL, path, "-o", tmp_path / "out2", "--no-render")
+    _, keys = read_keyframes(tmp_path / "out2" / "keyframes.json")
+    assert [(k.label, round(k.time, 3)) for k in keys] == [("key 1", 0.01), ("key 3", 0.04)]
+
+
+def test_a_session_of_a_newer_format_is_refused(tmp_path):
+    path = write_raw(tmp_path / "new.mcap", ticks() + KEY, meta={**GOOD_META, "format": "3"})
+    assert bad(tmp_path, path) == (
+        "metadata.format: expected 1 or 2 (a newer puppetcli wrote this file), got '3'"
+    )
