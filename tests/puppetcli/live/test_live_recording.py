@@ -147,3 +147,36 @@ def test_a_killed_recording_replays_up_to_its_last_flush(recorded):
     assert not read_session(killed).complete
     keys = replay(killed, tmp / "killed-out")
     assert worst_difference(live_keys[:1], keys) < 1e-12  # measured 0
+
+
+def test_touching_follows_the_touch_switch(tmp_path):
+    """The free pointer swept through the left forearm: with touching off it passes through
+    (no force on the hand); switched on outside the doll it strikes the forearm; switched on
+    inside, it touches nothing until it is clear (as after a release)."""
+    spec = load_rig(DOLL)
+    dev = preset("SpidarG6X3R")
+    ws = fit_workspace(np.array([[-1.3, -0.3, -1.0], [1.3, 2.0, 1.0]]), dev)
+
+    def sweep(switch_at: float | None) -> list[float]:
+        """Peak force on the hand over a 0.6 s sweep from 0.3 m in front of the forearm to
+        0.3 m behind it; touching switched on at that distance in front (None: never)."""
+        with open(tmp_path / "t.mcap", "wb") as f:
+            live = LiveRecording(spec, f, dev, ws, None, np.array([0.45, 1.36, 0.3]),
+                                 np.array([1.0, 0, 0, 0]), {})  # fmt: skip
+            mid, h = forearm_middle(live), live.model.options.h
+            live.filter.jump(mid + [0, 0, 0.3], (1.0, 0.0, 0.0, 0.0))
+            live.set_target(mid + [0, 0, 0.3], (1.0, 0.0, 0.0, 0.0))
+            peak, n = 0.0, round(0.6 / h)
+            for i in range(n + 1):
+                z = 0.3 - 0.6 * i / n
+                if switch_at is not None and abs(z - switch_at) < 0.5 * 0.6 / n:
+                    live.submit(Touch(True))
+                live.set_target(mid + [0, 0, z], (1.0, 0.0, 0.0, 0.0))
+                live.step()
+                peak = max(peak, float(np.linalg.norm(live.tap.requested[0])))
+            live.close()
+        return peak
+
+    assert sweep(None) == 0.0
+    assert sweep(0.25) > 50.0  # measured 594 N at 1 m/s: the ball strikes the forearm
+    assert sweep(0.0) == 0.0  # switched on inside the forearm: suspended until clear
