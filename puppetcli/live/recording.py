@@ -164,6 +164,14 @@ class LiveRecording:
         self.writer.add("/spidar/pose", t, {"t": t, "position": pos, "orientation": q})
         self.track.append(t, pos, q)
 
+    def act(self) -> None:
+        """Act on the queued commands now, without stepping (while the physics is paused):
+        keys, undo, touch, release; a grip waits for the physics (its jump needs ticks)."""
+        while self.queue and self._pending_grip is None:
+            if isinstance(self.queue[0], Grip):
+                return
+            self._command(self.queue.popleft())
+
     def _boundary(self) -> None:
         if self._pending_grip is not None:
             self._button(self.time, self._pending_grip)

@@ -201,9 +201,11 @@ class LiveServer:
     def _steps(self) -> None:
         """Take the steps that are due, within this frame's budget."""
         now = time.perf_counter()
+        keys_before = _key_list(self.live)
+        if self.clock.paused:
+            self.live.act()
         due = self.clock.due(now, self.live.time)
         start, taken, budget = now, 0, BUDGET / FRAME_HZ
-        keys_before = _key_list(self.live)
         try:
             while taken < due and time.perf_counter() - start < budget:
                 self.live.step()

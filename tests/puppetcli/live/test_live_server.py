@@ -110,6 +110,30 @@ def test_bad_messages_are_rejected_counted_and_harmless(live):
     asyncio.run(check())
 
 
+def test_a_key_taken_while_paused_is_taken_at_once(live):
+    async def check():
+        async with (
+            aiohttp.ClientSession() as http,
+            http.ws_connect(live.ws_url, origin=live.base) as ws,
+        ):
+            await ws.receive()
+            await ws.send_str(json.dumps({"type": "pause", "seq": 10, "on": True}))
+            paused = await frames_until(ws, lambda f: f["paused"] and f["ack"] >= 10)
+            await ws.send_str(json.dumps({"type": "key", "seq": 11, "label": "still"}))
+            while True:
+                msg = json.loads((await ws.receive(timeout=10)).data)
+                if msg["type"] == "keys":
+                    break
+            assert msg["keys"][-1]["label"] == "still"
+            assert msg["keys"][-1]["t"] == paused["t"]  # the physics did not move
+            await ws.send_str(json.dumps({"type": "undo", "seq": 12}))
+            await ws.send_str(json.dumps({"type": "pause", "seq": 13, "on": False}))
+            frame = await frames_until(ws, lambda f: f["ack"] >= 13 and f["t"] > paused["t"])
+            assert not frame["paused"]
+
+    asyncio.run(check())
+
+
 def test_ctrl_c_completes_the_session_and_its_outputs(live, tmp_path):
     async def pose():
         async with (
