@@ -1,0 +1,182 @@
+// What the mouse, the keyboard and a 3D mouse (Gamepad API) do: they move the grip's target
+// pose and send the commands of docs/live.md.
+import * as THREE from 'three';
+
+const DEG = Math.PI / 180;
+const DEPTH_STEP = 0.015; // m per wheel notch
+const TURN_PER_PIXEL = 0.5 * DEG;
+
+export class Input {
+  constructor(view, link, ui) {
+    this.view = view; this.link = link; this.ui = ui;
+    this.pos = new THREE.Vector3();
+    this.quat = new THREE.Quaternion();
+    this.dirty = false;
+    this.lastPointerSeq = 0;
+    this.drag = null; // {mode: 'grip'|'touch', plane, offset, x, y}
+    this.held = false; // gripping by G (no button held)
+    this.frame = null;
+    this.bind();
+  }
+
+  adopt(frame) {
+    this.frame = frame;
+    const mine = this.drag || this.held || this.dirty || frame.ack < this.lastPointerSeq;
+    if (!mine) {
+      this.pos.fromArray(frame.target.pos);
+      const q = frame.target.quat;
+      this.quat.set(q[1], q[2], q[3], q[0]);
+    }
+  }
+
+  flush() {
+    if (!this.dirty) return;
+    const q = this.quat;
+    const ok = this.link.send({ type: 'pointer', pos: this.pos.toArray(), quat: [q.w, q.x, q.y, q.z] });
+    if (ok) { this.lastPointerSeq = this.link.seq; this.dirty = false; }
+  }
+
+  command(message) { this.link.send(message); }
+
+  cameraAxes() {
+    const cam = this.view.camera;
+    const forward = new THREE.Vector3(); cam.getWorldDirection(forward);
+    const up = new THREE.Vector3(0, 1, 0).applyQuaternion(cam.quaternion);
+    const right = new THREE.Vector3(1, 0, 0).applyQuaternion(cam.quaternion);
+    return { forward, up, right };
+  }
+
+  planeThrough(point) {
+    return new THREE.Plane().setFromNormalAndCoplanarPoint(this.cameraAxes().forward, point);
+  }
+
+  moveBy(delta) { this.pos.add(delta); this.dirty = true; if (this.drag) this.drag.plane = this.planeThrough(this.pos); }
+
+  turn(axis, angle) {
+    this.quat.premultiply(new THREE.Quaternion().setFromAxisAngle(axis.normalize(), angle));
+    this.dirty = true;
+  }
+
+  bind() {
+    const area = document.getElementById('view');
+    area.addEventListener('pointerdown', (e) => this.down(e), { capture: true });
+    window.addEventListener('pointermove', (e) => this.move(e));
+    window.addEventListener('pointerup', (e) => this.up(e));
+    area.addEventListener('wheel', (e) => this.wheel(e), { capture: true, passive: false });
+    window.addEventListener('keydown', (e) => this.key(e));
+  }
+
+  down(e) {
+    if (e.button !== 0 || this.ui.stopped) return;
+    const touch = this.frame && this.frame.touch;
+    const hit = touch ? null : this.view.pick(e.clientX, e.clientY);
+    if (!touch && !hit) return; // the camera's drag
+    e.stopPropagation();
+    e.preventDefault();
+    if (hit) {
+      if (this.held) { this.command({ type: 'release' }); this.held = false; }
+      this.pos.copy(hit.point);
+      this.command({ type: 'grip', bone: hit.bone, point: hit.point.toArray() });
+    }
+    const plane = this.planeThrough(this.pos);
+    const onPlane = this.view.rayAt(e.clientX, e.clientY).ray.intersectPlane(plane, new THREE.Vector3());
+    const offset = onPlane ? this.pos.clone().sub(onPlane) : new THREE.Vector3();
+    this.drag = { mode: hit ? 'grip' : 'touch', plane, offset, x: e.clientX, y: e.clientY };
+    this.view.controls.enabled = false;
+  }
+
+  move(e) {
+    const d = this.drag;
+    if (!d) return;
+    if (e.shiftKey) {
+      const { up, right } = this.cameraAxes();
+      this.turn(up, (e.clientX - d.x) * TURN_PER_PIXEL);
+      this.turn(right, (e.clientY - d.y) * TURN_PER_PIXEL);
+      const onPlane = this.view.rayAt(e.clientX, e.clientY).ray.intersectPlane(d.plane, new THREE.Vector3());
+      if (onPlane) d.offset = this.pos.clone().sub(onPlane); // turning does not move the grip
+    } else {
+      const onPlane = this.view.rayAt(e.clientX, e.clientY).ray.intersectPlane(d.plane, new THREE.Vector3());
+      if (onPlane) { this.pos.copy(onPlane.add(d.offset)); this.dirty = true; }
+    }
+    d.x = e.clientX; d.y = e.clientY;
+  }
+
+  up(e) {
+    if (e.button !== 0 || !this.drag) return;
+    if (this.drag.mode === 'grip') this.command({ type: 'release' });
+    this.drag = null;
+    this.view.controls.enabled = true;
+  }
+
+  wheel(e) {
+    if (!(this.drag || this.held || (this.frame && this.frame.touch))) return;
+    e.preventDefault();
+    e.stopPropagation();
+    this.moveBy(this.cameraAxes().forward.multiplyScalar(-Math.sign(e.deltaY) * DEPTH_STEP));
+  }
+
+  key(e) {
+    if (e.target instanceof HTMLInputElement || this.ui.stopped) {
+      if (e.key === 'Enter' && e.target.id === 'label') { this.takeKey(); e.preventDefault(); }
+      return;
+    }
+    const k = e.key.length === 1 ? e.key.toLowerCase() : e.key;
+    const step = e.shiftKey ? 0.05 : 0.01;
+    const { forward, up, right } = this.cameraAxes();
+    const actions = {
+      k: () => this.takeKey(), Enter: () => this.takeKey(),
+      u: () => this.command({ type: 'undo' }),
+      z: () => e.ctrlKey && this.command({ type: 'undo' }),
+      ' ': () => this.ui.togglePause(), p: () => this.ui.togglePause(),
+      g: () => this.toggleHold(), r: () => this.release(), Escape: () => { this.release(); this.ui.hideHelp(); },
+      t: () => this.command({ type: 'touch', on: !(this.frame && this.frame.touch) }),
+      o: () => this.command({ type: 'position_only', on: !(this.frame && this.frame.position_only) }),
+      q: () => this.turn(forward, -5 * DEG), e: () => this.turn(forward, 5 * DEG),
+      '?': () => this.ui.toggleHelp(), h: () => this.ui.toggleHelp(),
+      ArrowLeft: () => this.held && this.moveBy(right.multiplyScalar(-step)),
+      ArrowRight: () => this.held && this.moveBy(right.multiplyScalar(step)),
+      ArrowUp: () => this.held && this.moveBy(up.multiplyScalar(step)),
+      ArrowDown: () => this.held && this.moveBy(up.multiplyScalar(-step)),
+      PageUp: () => this.held && this.moveBy(forward.multiplyScalar(step)),
+      PageDown: () => this.held && this.moveBy(forward.multiplyScalar(-step)),
+    };
+    if (actions[k]) { actions[k](); e.preventDefault(); }
+  }
+
+  takeKey() {
+    const label = this.ui.takeLabel();
+    this.command(label ? { type: 'key', label } : { type: 'key' });
+  }
+
+  toggleHold() {
+    if (this.frame && this.frame.grip) { this.release(); return; }
+    this.command({ type: 'grip' });
+    this.held = true;
+  }
+
+  release() {
+    if (this.frame && this.frame.grip) this.command({ type: 'release' });
+    this.held = false;
+    this.drag = null;
+    this.view.controls.enabled = true;
+  }
+
+  // A 3D mouse or gamepad: axes 0-2 move (m/s at full deflection), 3-5 turn (rad/s).
+  poll(dt) {
+    const pad = [...(navigator.getGamepads ? navigator.getGamepads() : [])].find((g) => g && g.axes.length >= 6);
+    this.pad = pad ? pad.id : null;
+    if (!pad) return;
+    const a = pad.axes.map((v) => (Math.abs(v) < 0.08 ? 0 : v));
+    const { forward, up, right } = this.cameraAxes();
+    const move = right.multiplyScalar(a[0]).add(up.multiplyScalar(-a[1])).add(forward.multiplyScalar(-a[2]));
+    if (move.lengthSq() > 0) this.moveBy(move.multiplyScalar(0.4 * dt));
+    const { forward: f, up: u, right: r } = this.cameraAxes();
+    if (a[3]) this.turn(r, a[3] * 90 * DEG * dt);
+    if (a[4]) this.turn(u, a[4] * 90 * DEG * dt);
+    if (a[5]) this.turn(f, a[5] * 90 * DEG * dt);
+    const pressed = pad.buttons.map((b) => b.pressed);
+    if (pressed[0] && !this.padWas?.[0]) this.toggleHold();
+    if (pressed[1] && !this.padWas?.[1]) this.takeKey();
+    this.padWas = pressed;
+  }
+}

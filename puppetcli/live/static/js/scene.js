@@ -1,0 +1,191 @@
+// The 3D view: the rig's shapes placed by the streamed body poses, joints, ground, props,
+// the pointer, the coupling line and the felt-force arrow.
+import * as THREE from 'three';
+import { OrbitControls } from '/static/vendor/three/OrbitControls.js';
+
+const v3 = (a) => new THREE.Vector3(a[0], a[1], a[2]);
+const q4 = (q) => new THREE.Quaternion(q[1], q[2], q[3], q[0]); // (w,x,y,z) -> three's (x,y,z,w)
+
+function geometryOf(shape) {
+  if (shape.kind === 'sphere') return new THREE.SphereGeometry(shape.radius, 24, 16);
+  if (shape.kind === 'capsule') return new THREE.CapsuleGeometry(shape.radius, 2 * shape.half[1], 8, 20);
+  return new THREE.BoxGeometry(2 * shape.half[0], 2 * shape.half[1], 2 * shape.half[2]);
+}
+
+export class View {
+  constructor(container, hello) {
+    this.hello = hello;
+    this.renderer = new THREE.WebGLRenderer({ antialias: true });
+    this.renderer.setPixelRatio(window.devicePixelRatio);
+    this.renderer.setSize(container.clientWidth, container.clientHeight);
+    container.appendChild(this.renderer.domElement);
+    this.scene = new THREE.Scene();
+    this.scene.background = new THREE.Color(hello.colors.background);
+    this.camera = new THREE.PerspectiveCamera(40, container.clientWidth / container.clientHeight, 0.01, 200);
+    this.controls = new OrbitControls(this.camera, this.renderer.domElement);
+    this.placeCamera(hello.camera);
+    this.addLights();
+    this.pickable = [];
+    this.bodies = [];
+    this.addShapes(hello);
+    this.addGround(hello);
+    this.addPointer(hello);
+    window.addEventListener('resize', () => this.resize(container));
+  }
+
+  placeCamera(cam) {
+    const target = v3(cam.target);
+    const az = THREE.MathUtils.degToRad(35), el = THREE.MathUtils.degToRad(18);
+    const dir = new THREE.Vector3(Math.sin(az) * Math.cos(el), Math.sin(el), Math.cos(az) * Math.cos(el));
+    this.camera.position.copy(target).addScaledVector(dir, 0.75 * cam.distance);
+    this.controls.target.copy(target);
+    this.controls.update();
+  }
+
+  addLights() {
+    this.scene.add(new THREE.HemisphereLight(0xffffff, 0x8a8f96, 2.2));
+    const sun = new THREE.DirectionalLight(0xffffff, 1.6);
+    sun.position.set(-2, 5, 3);
+    this.scene.add(sun);
+  }
+
+  addShapes(hello) {
+    const colors = hello.colors;
+    for (let b = 0; b < hello.bodies; b++) {
+      const group = new THREE.Group();
+      this.bodies.push(group);
+      this.scene.add(group);
+    }
+    const material = {
+      bone: new THREE.MeshLambertMaterial({ color: colors.bone }),
+      prop: new THREE.MeshLambertMaterial({ color: colors.prop }),
+    };
+    this.boneShape = {};
+    for (const shape of hello.shapes) {
+      const mesh = new THREE.Mesh(geometryOf(shape), material[shape.role] || material.prop);
+      mesh.position.copy(v3(shape.pos));
+      mesh.quaternion.copy(q4(shape.quat));
+      if (shape.bone) {
+        mesh.userData.bone = shape.bone;
+        this.pickable.push(mesh);
+        if (!(shape.bone in this.boneShape)) this.boneShape[shape.bone] = mesh;
+      }
+      (shape.body >= 0 ? this.bodies[shape.body] : this.scene).add(mesh);
+    }
+    const dot = new THREE.SphereGeometry(0.012, 12, 8);
+    const dotMaterial = new THREE.MeshBasicMaterial({ color: colors.joint, depthTest: false });
+    for (const joint of hello.joints) {
+      const mesh = new THREE.Mesh(dot, dotMaterial);
+      mesh.position.copy(v3(joint.pos));
+      mesh.renderOrder = 10;
+      this.bodies[joint.body].add(mesh);
+    }
+  }
+
+  addGround(hello) {
+    if (!hello.ground) return;
+    const y = hello.ground.height;
+    const plane = new THREE.Mesh(new THREE.PlaneGeometry(8, 8),
+      new THREE.MeshLambertMaterial({ color: hello.colors.ground }));
+    plane.rotation.x = -Math.PI / 2;
+    plane.position.set(hello.camera.target[0], y, hello.camera.target[2]);
+    this.scene.add(plane);
+    const grid = new THREE.GridHelper(8, 32, hello.colors.grid, hello.colors.grid);
+    grid.position.set(hello.camera.target[0], y + 0.001, hello.camera.target[2]);
+    this.scene.add(grid);
+  }
+
+  addPointer(hello) {
+    const color = new THREE.Color(hello.colors.pointer);
+    const radius = Math.max(hello.pointer_radius, 0.015);
+    this.pointer = new THREE.Mesh(new THREE.SphereGeometry(radius, 20, 14),
+      new THREE.MeshLambertMaterial({ color, transparent: true, opacity: 0.6 }));
+    this.pointer.add(new THREE.AxesHelper(0.05));
+    this.scene.add(this.pointer);
+    this.ghost = new THREE.Mesh(new THREE.SphereGeometry(radius, 16, 10),
+      new THREE.MeshBasicMaterial({ color, transparent: true, opacity: 0.2, depthWrite: false }));
+    this.scene.add(this.ghost);
+    const line = new THREE.BufferGeometry().setFromPoints([new THREE.Vector3(), new THREE.Vector3()]);
+    this.coupling = new THREE.Line(line, new THREE.LineBasicMaterial({ color: hello.colors.coupling }));
+    this.coupling.frustumCulled = false;
+    this.scene.add(this.coupling);
+    this.arrow = new THREE.ArrowHelper(new THREE.Vector3(0, 1, 0), new THREE.Vector3(), 0.1, 0xc0392b);
+    this.scene.add(this.arrow);
+  }
+
+  update(frame) {
+    const p = frame.body_pos, q = frame.body_quat;
+    for (let i = 0; i < this.bodies.length; i++) {
+      this.bodies[i].position.set(p[3 * i], p[3 * i + 1], p[3 * i + 2]);
+      this.bodies[i].quaternion.set(q[4 * i + 1], q[4 * i + 2], q[4 * i + 3], q[4 * i]);
+    }
+    this.pointer.position.copy(v3(frame.pointer.pos));
+    this.pointer.quaternion.copy(q4(frame.pointer.quat));
+    this.pointer.material.opacity = frame.touch ? 1.0 : 0.6;
+    const target = v3(frame.target.pos);
+    this.ghost.position.copy(target);
+    this.ghost.visible = target.distanceTo(this.pointer.position) > 0.01;
+    this.coupling.visible = !!frame.grip;
+    if (frame.grip) {
+      const pos = this.coupling.geometry.attributes.position;
+      pos.setXYZ(0, ...frame.pointer.pos);
+      pos.setXYZ(1, ...frame.grip.point);
+      pos.needsUpdate = true;
+    }
+    const force = v3(frame.wrench.force);
+    const size = force.length();
+    this.arrow.visible = size > 0.2;
+    if (this.arrow.visible) {
+      this.arrow.position.copy(this.pointer.position);
+      this.arrow.setDirection(force.clone().normalize());
+      this.arrow.setLength(Math.min(0.5, 0.01 * size), 0.03, 0.02);
+    }
+  }
+
+  render() { this.renderer.render(this.scene, this.camera); }
+
+  resize(container) {
+    this.camera.aspect = container.clientWidth / container.clientHeight;
+    this.camera.updateProjectionMatrix();
+    this.renderer.setSize(container.clientWidth, container.clientHeight);
+  }
+
+  // The bone under a page position (clientX/Y), with the world point hit, or null.
+  pick(x, y) {
+    const ray = this.rayAt(x, y);
+    const hit = ray.intersectObjects(this.pickable, false)[0];
+    return hit ? { bone: hit.object.userData.bone, point: hit.point } : null;
+  }
+
+  rayAt(x, y) {
+    const rect = this.renderer.domElement.getBoundingClientRect();
+    const ndc = new THREE.Vector2(((x - rect.left) / rect.width) * 2 - 1, -((y - rect.top) / rect.height) * 2 + 1);
+    const ray = new THREE.Raycaster();
+    ray.setFromCamera(ndc, this.camera);
+    return ray;
+  }
+
+  screenOfWorld(point) {
+    const rect = this.renderer.domElement.getBoundingClientRect();
+    const v = v3(point).project(this.camera);
+    return { x: rect.left + ((v.x + 1) / 2) * rect.width, y: rect.top + ((1 - v.y) / 2) * rect.height };
+  }
+
+  screenOf(bone) {
+    const mesh = this.boneShape[bone];
+    if (!mesh) return null;
+    const centre = new THREE.Vector3();
+    mesh.getWorldPosition(centre);
+    return this.screenOfWorld([centre.x, centre.y, centre.z]);
+  }
+
+  // A small picture of what is on screen now (call right after render()).
+  thumbnail() {
+    const c = document.createElement('canvas');
+    c.width = 160; c.height = 120;
+    const src = this.renderer.domElement;
+    const s = Math.min(src.width / 4, src.height / 3);
+    c.getContext('2d').drawImage(src, (src.width - 4 * s) / 2, (src.height - 3 * s) / 2, 4 * s, 3 * s, 0, 0, 160, 120);
+    return c.toDataURL('image/jpeg', 0.75);
+  }
+}
