@@ -99,6 +99,7 @@ def command(
     spec = load_rig(rig)
     dev = preset_from_option(device)
     outdir = session.with_suffix("")
+    made_outdir = not outdir.exists()
     prepare_outdir(outdir, KEY_OUTPUTS, force)
     model = build_model(spec)
     lo, hi = scene_bounds(model, spec)
@@ -136,6 +137,8 @@ def command(
     try:
         outcome = asyncio.run(server.serve(begin, lambda url: _ready(url, host, no_open)))
     except OSError as exc:
+        if made_outdir and not recording:
+            outdir.rmdir()  # nothing was recorded: leave no trace
         if exc.errno == errno.EADDRINUSE:
             raise PuppetError(f"{host}:{port} is in use by another program: pick another "
                               "--port (0 = any free port)") from None  # fmt: skip

@@ -213,7 +213,7 @@ class LiveRecording:
             b, point = m.bone_names.index(c.bone), np.asarray(c.point, float)
         anchor = quat.rotate(quat.conj(state.body_quat[b]), point - state.body_pos[b])
         local = m.body_pos0[b] + anchor - m.bone_head0[b]
-        gains = {k: v for k, v in GRIP_DEFAULTS.items()} | {"position_only": self.position_only}
+        gains = GRIP_DEFAULTS | {"position_only": self.position_only}
         message = {"button": "grip", "state": "down", "bone": m.bone_names[b], "point": local,
                    "gains": gains}  # fmt: skip
         if c.bone is None:

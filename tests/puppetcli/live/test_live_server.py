@@ -38,6 +38,26 @@ async def frames_until(ws, predicate, limit: float = 10.0) -> dict:
     raise AssertionError("no such frame in time")
 
 
+def take_key(server: Live, label: str, linger: float = 0.0) -> None:
+    """A page that takes one key, waits until the server applied it, stays ``linger`` s."""
+
+    async def page():
+        async with (
+            aiohttp.ClientSession() as http,
+            http.ws_connect(server.ws_url, origin=server.base) as ws,
+        ):
+            await ws.receive()
+            await ws.send_str(json.dumps({"type": "key", "seq": 1, "label": label}))
+            await frames_until(ws, lambda f: f["ack"] >= 1)
+            await asyncio.sleep(linger)
+
+    asyncio.run(page())
+
+
+def replay(session: Path, out: Path):
+    return CliRunner().invoke(cli, ["pose", str(DOLL), str(session), "-o", str(out), "--no-render"])
+
+
 @pytest.fixture(scope="module")
 def live(tmp_path_factory):
     server = Live(tmp_path_factory.mktemp("live") / "s.mcap")
@@ -135,22 +155,12 @@ def test_a_key_taken_while_paused_is_taken_at_once(live):
 
 
 def test_ctrl_c_completes_the_session_and_its_outputs(live, tmp_path):
-    async def pose():
-        async with (
-            aiohttp.ClientSession() as http,
-            http.ws_connect(live.ws_url, origin=live.base) as ws,
-        ):
-            await ws.receive()
-            await ws.send_str(json.dumps({"type": "key", "seq": 1, "label": "first"}))
-            await frames_until(ws, lambda f: f["ack"] >= 1)
-
-    asyncio.run(pose())
+    take_key(live, "first")
     code, out, err = live.finish(signal.SIGINT)
     assert code == 0, err
     session = Path(re.search(r"session (\S+):", out).group(1))
     assert "(interrupted)" in out and (session.with_suffix("") / "keyframes.json").exists()
-    result = CliRunner().invoke(cli, ["pose", str(DOLL), str(session), "-o", str(tmp_path / "r"),
-                                      "--no-render"])  # fmt: skip
+    result = replay(session, tmp_path / "r")
     assert result.exit_code == 0 and "ended abruptly" not in result.output
     live_keys = read_keyframes(session.with_suffix("") / "keyframes.json")[1]
     keys = read_keyframes(tmp_path / "r" / "keyframes.json")[1]
@@ -171,27 +181,15 @@ def test_a_port_in_use_is_one_error_line(tmp_path):
         f"error: 127.0.0.1:{port} is in use by another program: pick another --port "
         "(0 = any free port)"
     )
-    assert not (tmp_path / "s.mcap").exists()
+    assert not (tmp_path / "s.mcap").exists() and not (tmp_path / "s").exists()
 
 
 def test_a_killed_session_replays_what_was_flushed(tmp_path):
     server = Live(tmp_path / "k.mcap")
-
-    async def pose():
-        async with (
-            aiohttp.ClientSession() as http,
-            http.ws_connect(server.ws_url, origin=server.base) as ws,
-        ):
-            await ws.receive()
-            await ws.send_str(json.dumps({"type": "key", "seq": 1, "label": "kept"}))
-            await frames_until(ws, lambda f: f["ack"] >= 1)
-            await asyncio.sleep(1.6)  # the session is flushed every second
-
-    asyncio.run(pose())
+    take_key(server, "kept", linger=1.6)  # the session is flushed every second
     code, _, _ = server.finish(signal.SIGKILL)
     assert code == -signal.SIGKILL
-    result = CliRunner().invoke(cli, ["pose", str(DOLL), str(tmp_path / "k.mcap"), "-o",
-                                      str(tmp_path / "r"), "--no-render"])  # fmt: skip
+    result = replay(tmp_path / "k.mcap", tmp_path / "r")
     assert result.exit_code == 0, result.output
     assert "the recording ended abruptly" in result.stderr
     assert [k.label for k in read_keyframes(tmp_path / "r" / "keyframes.json")[1]] == ["kept"]
@@ -199,17 +197,40 @@ def test_a_killed_session_replays_what_was_flushed(tmp_path):
 
 def test_closing_the_last_page_stops_the_session(tmp_path):
     server = Live(tmp_path / "c.mcap")
-
-    async def visit():
-        async with (
-            aiohttp.ClientSession() as http,
-            http.ws_connect(server.ws_url, origin=server.base) as ws,
-        ):
-            await ws.receive()
-
-    asyncio.run(visit())
+    take_key(server, "only")
     started = time.monotonic()
     code, out, err = server.finish(sig=None, timeout=GRACE + 30)
     assert code == 0, err
     assert "(page closed)" in out and time.monotonic() - started >= GRACE - 1.0
-    assert (tmp_path / "c" / "keyframes.json").exists()
+    assert [k.label for k in read_keyframes(tmp_path / "c" / "keyframes.json")[1]] == ["only"]
+
+
+@pytest.mark.parametrize(
+    ("args", "expected"),
+    [
+        (
+            ["-o", "{tmp}/s.txt"],
+            "error: {tmp}/s.txt: expected a session file name ending in .mcap, got '.txt'",
+        ),
+        (["-o", "{tmp}/old.mcap"], "error: {tmp}/old.mcap exists: pass --force to overwrite"),
+        (["-o", "{tmp}/s.mcap", "--view", "sideways"], "error: --view: expected one of"),
+        (["-o", "{tmp}/s.mcap", "--device", "SpidarG9"], "error: unknown device preset 'SpidarG9'"),
+    ],
+)
+def test_bad_options_are_one_line_before_anything_starts(tmp_path, args, expected):
+    (tmp_path / "old.mcap").write_bytes(b"keep me")
+    result = CliRunner().invoke(cli, ["live", str(DOLL), *(a.format(tmp=tmp_path) for a in args)])
+    assert result.exit_code == 1
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(expected.format(tmp=tmp_path)), lines
+    assert (tmp_path / "old.mcap").read_bytes() == b"keep me"
+    assert not (tmp_path / "s.mcap").exists() and not (tmp_path / "s").exists()
+
+
+def test_the_live_benchmark_reports_every_figure():
+    from puppetcli.bench_live import format_live, measure_live
+
+    (row,) = measure_live([0.005], seconds=1.5)
+    values = [row.rtf, row.headroom, row.step_us, row.fps, row.latency_p50, row.latency_p95]
+    assert all(v > 0 and v == v for v in values)  # measured, finite (no timing asserted)
+    assert format_live([row]).splitlines()[1].split()[0] == "0.005"
