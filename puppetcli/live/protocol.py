@@ -115,12 +115,13 @@ def _label(msg: dict) -> str | None:
 
 
 def _grip(msg: dict, bones: list[str]) -> rec.Grip:
+    only = None if msg.get("position_only") is None else _flag(msg, "position_only")
     if "bone" not in msg:
-        return rec.Grip()
+        return rec.Grip(position_only=only)
     bone = msg["bone"]
     if bone not in bones:
         raise Rejected(f"bone: expected a bone of the rig, got {bone!r:.40}")
-    return rec.Grip(bone, np.array(_vector(msg, "point", 3)))
+    return rec.Grip(bone, np.array(_vector(msg, "point", 3)), only)
 
 
 _PARSERS = {

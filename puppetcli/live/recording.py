@@ -35,12 +35,13 @@ from puppetcli.runtrace import tensions_message, wrench_message
 from puppetcli.script import DEFAULT_LOWPASS, DEFAULT_MAX_FORCE, DEFAULT_MAX_TORQUE
 from puppetcli.script_actions import GRIP_DEFAULTS
 from puppetcli.session import TICK, Event, Session, SessionWriter, Workspace
-from puppetcli.spidar import DevicePreset
+from puppetcli.spidar import DevicePreset, TensionDistributor
 from solver import quat
+from solver.fast import fast_step
 from solver.grip import nearest_point
 from solver.model import Model, build_model
 from solver.spec import RigSpec
-from solver.state import StepInput, StepReport
+from solver.state import StepInput, StepReport, initial_state
 
 __all__ = ["Grip", "Key", "LiveRecording", "Release", "Touch", "Undo", "live_settings"]
 
@@ -54,10 +55,12 @@ POINTER_RADIUS = 0.02  # m: the free pointer's contact sphere
 @dataclass(frozen=True)
 class Grip:
     """Grip ``bone`` at the world ``point`` (the pointer jumps there), or with ``bone`` None
-    the bone nearest the pointer within reach."""
+    the bone nearest the pointer within reach; ``position_only`` None: the session's
+    setting."""
 
     bone: str | None = None
     point: np.ndarray | None = None
+    position_only: bool | None = None
 
 
 @dataclass(frozen=True)
@@ -213,7 +216,8 @@ class LiveRecording:
             b, point = m.bone_names.index(c.bone), np.asarray(c.point, float)
         anchor = quat.rotate(quat.conj(state.body_quat[b]), point - state.body_pos[b])
         local = m.body_pos0[b] + anchor - m.bone_head0[b]
-        gains = GRIP_DEFAULTS | {"position_only": self.position_only}
+        only = self.position_only if c.position_only is None else c.position_only
+        gains = GRIP_DEFAULTS | {"position_only": only}
         message = {"button": "grip", "state": "down", "bone": m.bone_names[b], "point": local,
                    "gains": gains}  # fmt: skip
         if c.bone is None:
@@ -234,6 +238,14 @@ class LiveRecording:
         action = self.to_action(Event(t, "/spidar/buttons", index, message))
         if action is not None:
             self.runner.act(action)
+
+    def warm_up(self) -> None:
+        """Run the compiled parts once on throwaway inputs (the step, the tension programme):
+        numba compiles or loads them now rather than in the first live step."""
+        fast_step(self.model, initial_state(self.model), StepInput())
+        TensionDistributor(self.runner.distributor.preset).display(
+            np.zeros(3), quat.IDENTITY, np.zeros(3), np.zeros(3)
+        )
 
     def flush(self) -> None:
         """Push everything recorded so far to the disk (a kill after this loses nothing)."""

@@ -50,6 +50,12 @@ def noted(kind: str, text: str) -> bool:
     return kind == "error" or (kind == "warning" and "GL Driver Message" not in text)
 
 
+def angle_between(a, b, joint: str) -> float:
+    """Degrees between a joint's rotations in two keys."""
+    dot = abs(float(np.dot(a.bones[joint].local, b.bones[joint].local)))
+    return 2 * math.degrees(math.acos(min(1.0, dot)))
+
+
 def elbow_degrees(key) -> float:
     return 2 * math.degrees(math.acos(min(1.0, abs(float(key.bones["forearm_l"].local[0])))))
 
@@ -84,6 +90,19 @@ def test_posing_the_doll_in_the_browser(tmp_path):
             page.wait_for_timeout(1500)
             page.keyboard.press("k")
             page.wait_for_function("puppet.keys.length === 2")
+            head = page.evaluate("puppet.screenOf('head')")  # Shift+drag: turn the head
+            page.mouse.move(head["x"], head["y"])
+            page.keyboard.down("Shift")
+            page.mouse.down()
+            page.wait_for_function("puppet.lastFrame.grip && !puppet.lastFrame.grip.position_only")
+            for i in range(1, 31):
+                page.mouse.move(head["x"] + 3.0 * i, head["y"])
+                page.wait_for_timeout(30)
+            page.wait_for_timeout(500)
+            page.keyboard.press("k")
+            page.wait_for_function("puppet.keys.length === 3")
+            page.mouse.up()
+            page.keyboard.up("Shift")
             page.wait_for_timeout(300)
             ARTIFACTS.mkdir(parents=True, exist_ok=True)
             shot = ARTIFACTS / "live-page.png"
@@ -108,7 +127,7 @@ def test_posing_the_doll_in_the_browser(tmp_path):
                                       str(tmp_path / "replay"), "--no-render"])  # fmt: skip
     assert result.exit_code == 0, result.output
     keys = read_keyframes(tmp_path / "replay" / "keyframes.json")[1]
-    assert [k.label for k in keys] == [k.label for k in live_keys] and len(keys) == 2
+    assert [k.label for k in keys] == [k.label for k in live_keys] and len(keys) == 3
     for a, b in zip(live_keys, keys, strict=True):
         for name in a.bones:
             angle = 2 * np.arccos(
@@ -117,6 +136,8 @@ def test_posing_the_doll_in_the_browser(tmp_path):
             assert math.degrees(angle) < 0.5  # the issue's bound; measured 0 (the same floats)
     bent, kept = elbow_degrees(live_keys[0]), elbow_degrees(live_keys[1])
     assert bent > 10.0 and kept > 0.8 * bent  # the elbow bent and kept most of it
+    turned = sum(angle_between(live_keys[2], live_keys[1], j) for j in ("neck", "head"))
+    assert turned > 10.0  # Shift+drag turned the head (neck and head joints together)
     picture = __import__("cv2").imread(str(shot))
     bone = np.array([0x8C, 0xBF, 0xD9])  # BGR of the bone colour, lit somewhere near it
     near = np.abs(picture.astype(int) - bone).max(axis=2) < 60

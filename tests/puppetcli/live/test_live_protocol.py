@@ -25,6 +25,9 @@ def test_the_documented_messages_parse():
     _, c = parse({"type": "grip", "bone": "forearm_l", "point": [0.1, 1.4, 0]})
     assert c.bone == "forearm_l" and np.array_equal(c.point, [0.1, 1.4, 0])
     assert parse({"type": "grip"})[1] == recording.Grip()
+    _, c = parse({"type": "grip", "bone": "hips", "point": [0, 1, 0], "position_only": False})
+    assert c.position_only is False
+    assert parse({"type": "grip", "position_only": True})[1] == recording.Grip(position_only=True)
     assert parse({"type": "release"})[1] == recording.Release()
     assert parse({"type": "touch", "on": True})[1] == recording.Touch(True)
     assert parse({"type": "position_only", "on": False})[1] == protocol.PositionOnly(False)
@@ -49,6 +52,7 @@ BAD = [
     ({"type": "grip", "bone": "tail", "point": [0, 0, 0]}, "bone: expected a bone of the rig"),
     ({"type": "grip", "bone": "hips"}, "point: expected 3 numbers"),
     ({"type": "touch", "on": 1}, "on: expected true or false"),
+    ({"type": "grip", "position_only": "no"}, "position_only: expected true or false"),
     ({"type": "key", "label": "x" * 65}, "label: expected printable text of at most 64"),
     ({"type": "key", "label": "a\nb"}, "label: expected printable text"),
     ({"type": "launch"}, "type: expected one of"),

@@ -76,7 +76,9 @@ export class Input {
     if (hit) {
       if (this.held) { this.command({ type: 'release' }); this.held = false; }
       this.pos.copy(hit.point);
-      this.command({ type: 'grip', bone: hit.bone, point: hit.point.toArray() });
+      const grip = { type: 'grip', bone: hit.bone, point: hit.point.toArray() };
+      if (e.shiftKey) grip.position_only = false; // Shift+press: hold the whole bone, to turn it
+      this.command(grip);
     }
     const plane = this.planeThrough(this.pos);
     const onPlane = this.view.rayAt(e.clientX, e.clientY).ray.intersectPlane(plane, new THREE.Vector3());
@@ -89,6 +91,10 @@ export class Input {
     const d = this.drag;
     if (!d) return;
     if (e.shiftKey) {
+      if (this.frame?.grip?.position_only && !this.warned) {
+        this.ui.notice('info', 'Turning holds the bone only in a whole-bone grip: press Shift before the button, or O');
+        this.warned = true;
+      }
       const { up, right } = this.cameraAxes();
       this.turn(up, (e.clientX - d.x) * TURN_PER_PIXEL);
       this.turn(right, (e.clientY - d.y) * TURN_PER_PIXEL);
