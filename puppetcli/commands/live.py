@@ -27,6 +27,7 @@ from puppetcli.script import DEFAULT_MAX_FORCE, DEFAULT_MAX_TORQUE
 from puppetcli.script_actions import GRIP_DEFAULTS
 from puppetcli.session import METADATA_NAME
 from puppetcli.spidar import preset_from_option
+from puppetcli.warmup import warm_up
 from solver.errors import PuppetError
 from solver.model import build_model
 
@@ -119,7 +120,7 @@ def command(
         live = LiveRecording(spec, f, dev, workspace, step, start, np.array([1.0, 0, 0, 0]),
                              recorder)  # fmt: skip
         recording.append(live)
-        _warm_up(live)
+        warm_up(live.warm_up)
         return live
 
     def finish(outcome: Outcome) -> list[str]:
@@ -147,22 +148,6 @@ def command(
     _report(session, outdir, rig, recording[0], outcome)
     if outcome.error is not None:
         raise outcome.error
-
-
-def _warm_up(live: LiveRecording) -> None:
-    """Compile (or load from numba's cache) the kernels before the page connects: a first
-    step that compiles would stall the server for minutes with the page blank."""
-    notice = threading.Timer(2.0, lambda: click.echo(
-        "compiling the solver: the first run on this machine takes about 3 minutes "
-        "(later runs load it in under a second)", err=True))  # fmt: skip
-    notice.start()
-    started = time.perf_counter()
-    try:
-        live.warm_up()
-    finally:
-        notice.cancel()
-    if time.perf_counter() - started > 2.0:
-        click.echo(f"solver ready ({time.perf_counter() - started:.0f} s)", err=True)
 
 
 def _hello(model, spec, step, device: str, centre, radius: float) -> dict:
