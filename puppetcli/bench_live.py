@@ -13,6 +13,13 @@ radius, for ``seconds``.  Measured from the frames:
 - input-to-frame latency: from sending a target to receiving the first frame that has
   applied it (``ack``), median and 95th percentile; a browser adds its own render (at most
   one display frame) to this.
+
+Then, when playwright and Debian's Chromium are installed, the same grip is dragged with
+the mouse in the real page (headless), and after ``PAGE_SETTLE`` s (the page adapts its
+resolution to its frame rate) the page's own measures over ``seconds`` are read:
+input-to-screen latency (from sending a target to drawing the first frame that applied it)
+and the page's frames per second.  Headless Chromium draws with a software renderer, so its
+frame rate, not the server, bounds that latency.
 """
 
 from __future__ import annotations
@@ -21,11 +28,12 @@ import asyncio
 import json
 import math
 import re
+import signal
 import subprocess
 import sys
 import tempfile
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -35,9 +43,19 @@ __all__ = ["LiveRow", "format_live", "measure_live"]
 DOLL = Path(__file__).resolve().parents[1] / "rigs" / "doll.yaml"
 
 
+CHROMIUM = "/usr/bin/chromium"
+PAGE_SETTLE = 4.0  # s of dragging before the page's measures (it adapts its resolution)
+CHROMIUM_FLAGS = [
+    "--no-sandbox", "--disable-gpu", "--disable-background-networking",
+    "--disable-component-update", "--disable-sync", "--no-first-run",
+    "--use-angle=swiftshader", "--enable-unsafe-swiftshader",
+]  # fmt: skip
+
+
 @dataclass(frozen=True)
 class LiveRow:
-    """One h: rtf, headroom, step time (µs), frames/s, latency p50/p95 (ms), frames behind."""
+    """One h: rtf, headroom, step time (µs), frames/s, latency p50/p95 (ms), frames behind;
+    in a real page (None without a browser): latency p50 (ms) and the page's frames/s."""
 
     h: float
     rtf: float
@@ -47,6 +65,8 @@ class LiveRow:
     latency_p50: float
     latency_p95: float
     behind: float
+    page_p50: float | None = None
+    page_fps: float | None = None
 
 
 async def _drive(ws_url: str, origin: str, seconds: float) -> tuple[list[dict], list[float]]:
@@ -77,10 +97,42 @@ async def _drive(ws_url: str, origin: str, seconds: float) -> tuple[list[dict], 
             message = {"type": "pointer", "seq": seq, "pos": target.tolist(),
                        "quat": [1, 0, 0, 0]}  # fmt: skip
             await ws.send_str(json.dumps(message))
-        await ws.send_str(json.dumps({"type": "stop"}))
-        async for _ in ws:
-            pass
+        await ws.send_str(json.dumps({"type": "release"}))
     return frames, latency
+
+
+def _page(base: str, token: str, seconds: float) -> tuple[float, float] | None:
+    """(latency p50 ms, frames/s) of the real page dragging the forearm; None without a
+    browser."""
+    try:
+        from playwright.sync_api import sync_playwright
+    except ImportError:
+        return None
+    if not Path(CHROMIUM).exists():
+        return None
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_FLAGS)
+        page = browser.new_page(viewport={"width": 1280, "height": 800})
+        page.goto(f"{base}/?token={token}&noconfirm=1")
+        page.wait_for_function("window.puppet && window.puppet.ready", timeout=60_000)
+        page.keyboard.press("Escape")
+        at = page.evaluate("puppet.screenOf('forearm_l')")
+        frames0 = measured = None
+        page.mouse.move(at["x"], at["y"])
+        page.mouse.down()
+        start = time.perf_counter()
+        while time.perf_counter() - start < PAGE_SETTLE + seconds:
+            if start + PAGE_SETTLE <= time.perf_counter() and frames0 is None:
+                page.evaluate("puppet.resetLatency()")  # the page has adapted its resolution
+                frames0, measured = page.evaluate("puppet.frames"), time.perf_counter()
+            phase = 2 * math.pi * 0.25 * (time.perf_counter() - start)
+            page.mouse.move(at["x"] + 60 * (math.cos(phase) - 1), at["y"] - 60 * math.sin(phase))
+            page.wait_for_timeout(16)
+        fps = (page.evaluate("puppet.frames") - frames0) / (time.perf_counter() - measured)
+        latency = page.evaluate("puppet.latency()")
+        page.mouse.up()
+        browser.close()
+    return latency["p50"], fps
 
 
 def _row(h: float, frames: list[dict], latency: list[float]) -> LiveRow:
@@ -97,8 +149,9 @@ def _row(h: float, frames: list[dict], latency: list[float]) -> LiveRow:
     )  # fmt: skip
 
 
-def measure_live(steps_h: list[float], seconds: float = 6.0) -> list[LiveRow]:
-    """Run and drive a live session per h (module docstring)."""
+def measure_live(steps_h: list[float], seconds: float = 6.0, browser: bool = True) -> list[LiveRow]:
+    """Run and drive a live session per h (module docstring); ``browser``: also in a real
+    page when one can be had."""
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for h in steps_h:
@@ -114,19 +167,29 @@ def measure_live(steps_h: list[float], seconds: float = 6.0) -> list[LiveRow]:
                 base, token = found.groups()
                 url = base.replace("http://", "ws://") + "/ws?token=" + token
                 frames, latency = asyncio.run(_drive(url, base, seconds))
-                rows.append(_row(h, frames, latency))
+                page = _page(base, token, seconds) if browser else None
+                row = _row(h, frames, latency)
+                rows.append(
+                    row if page is None else replace(row, page_p50=page[0], page_fps=page[1])
+                )
             finally:
+                proc.send_signal(signal.SIGINT)
                 proc.communicate(timeout=120)
     return rows
 
 
 def format_live(rows: list[LiveRow]) -> str:
     head = (f"{'h (s)':>8} {'real time':>10} {'headroom':>9} {'step µs':>8} {'frames/s':>9} "
-            f"{'latency p50':>12} {'p95 (ms)':>9} {'behind':>7}")  # fmt: skip
+            f"{'latency p50':>12} {'p95 (ms)':>9} {'behind':>7} {'page p50 (ms)':>14} "
+            f"{'page fps':>9}")  # fmt: skip
     lines = [head]
     for r in rows:
+        page = "—".rjust(14) + "—".rjust(10) if r.page_p50 is None else (
+            f"{r.page_p50:>14.1f} {r.page_fps:>9.1f}")  # fmt: skip
         lines.append(
             f"{r.h:>8g} {r.rtf:>9.3f}× {r.headroom:>8.2f}× {r.step_us:>8.0f} {r.fps:>9.1f} "
-            f"{r.latency_p50:>12.1f} {r.latency_p95:>9.1f} {r.behind:>6.0%}"
+            f"{r.latency_p50:>12.1f} {r.latency_p95:>9.1f} {r.behind:>6.0%} {page}"
         )
+    lines.append("latency: page input to the frame that applied it, at the socket; page: "
+                 "input to screen in headless Chromium (software GL)")  # fmt: skip
     return "\n".join(lines)

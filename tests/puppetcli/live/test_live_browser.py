@@ -16,15 +16,14 @@ import pytest
 from click.testing import CliRunner
 from liveproc import DOLL, ROOT, Live
 
+from puppetcli import bench_live
 from puppetcli.cli import cli
 from puppetcli.keyframes import read_keyframes
 from puppetcli.session import read_session
 
-CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
+CHROMIUM = shutil.which("chromium") or bench_live.CHROMIUM
+FLAGS = bench_live.CHROMIUM_FLAGS
 ARTIFACTS = Path(os.environ.get("PUPPETCLI_ARTIFACTS", ROOT / "test-artifacts"))
-FLAGS = ["--no-sandbox", "--disable-gpu", "--disable-background-networking",
-         "--disable-component-update", "--disable-sync", "--no-first-run",
-         "--use-angle=swiftshader", "--enable-unsafe-swiftshader"]  # fmt: skip
 
 
 def browser_or_skip():

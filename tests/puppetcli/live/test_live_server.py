@@ -230,7 +230,7 @@ def test_bad_options_are_one_line_before_anything_starts(tmp_path, args, expecte
 def test_the_live_benchmark_reports_every_figure():
     from puppetcli.bench_live import format_live, measure_live
 
-    (row,) = measure_live([0.005], seconds=1.5)
+    (row,) = measure_live([0.005], seconds=1.5, browser=False)
     values = [row.rtf, row.headroom, row.step_us, row.fps, row.latency_p50, row.latency_p95]
     assert all(v > 0 and v == v for v in values)  # measured, finite (no timing asserted)
     assert format_live([row]).splitlines()[1].split()[0] == "0.005"

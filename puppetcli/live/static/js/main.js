@@ -8,6 +8,7 @@ const puppet = {
   ready: false, connected: false, frames: 0, lastFrame: null, keys: [], notices: [],
   stopped: null, errors: [],
   latency: () => link.latency(),
+  resetLatency: () => { link.samples.length = 0; },
   screenOf: (bone) => view && view.screenOf(bone),
   screenOfWorld: (p) => view && view.screenOfWorld(p),
 };
@@ -43,9 +44,11 @@ function start(hello) {
 function draw(now) {
   requestAnimationFrame(draw);
   input.poll(Math.min(0.1, (now - last) / 1000));
+  if (fresh) view.adapt(now - last);
   last = now;
   input.flush();
   if (!frame) return;
+  if (!fresh && !view.moved()) return; // nothing new to draw
   if (fresh) {
     input.adopt(frame);
     view.update(frame);

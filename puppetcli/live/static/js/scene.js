@@ -15,8 +15,10 @@ function geometryOf(shape) {
 export class View {
   constructor(container, hello) {
     this.hello = hello;
-    this.renderer = new THREE.WebGLRenderer({ antialias: true });
-    this.renderer.setPixelRatio(window.devicePixelRatio);
+    // Antialiasing only where the pixels are small (a high-density display): it costs a
+    // software renderer (no GPU) more than half its frame rate.
+    this.renderer = new THREE.WebGLRenderer({ antialias: window.devicePixelRatio > 1 });
+    this.renderer.setPixelRatio(Math.min(window.devicePixelRatio, 2));
     this.renderer.setSize(container.clientWidth, container.clientHeight);
     container.appendChild(this.renderer.domElement);
     this.scene = new THREE.Scene();
@@ -143,6 +145,31 @@ export class View {
   }
 
   render() { this.renderer.render(this.scene, this.camera); }
+
+  // Dynamic resolution: a page drawing slower than ~40 frames/s (a software renderer, a
+  // weak GPU) draws fewer pixels, down to half the density; a fast one goes back up.
+  adapt(frameMs) {
+    this.frameMs = this.frameMs === undefined ? frameMs : 0.9 * this.frameMs + 0.1 * frameMs;
+    const now = performance.now();
+    if (now - (this.adapted || 0) < 1000) return;
+    const ratio = this.renderer.getPixelRatio(), best = Math.min(window.devicePixelRatio, 2);
+    let next = ratio;
+    if (this.frameMs > 25 && ratio > 0.5) next = Math.max(0.5, ratio * 0.8);
+    else if (this.frameMs < 18 && ratio < best) next = Math.min(best, ratio * 1.25);
+    if (next !== ratio) {
+      this.renderer.setPixelRatio(next);
+      this.renderer.setSize(this.renderer.domElement.clientWidth, this.renderer.domElement.clientHeight);
+      this.adapted = now;
+    }
+  }
+
+  // Whether the camera moved since the last call (the page then redraws without a new frame).
+  moved() {
+    const now = this.camera.matrixWorld.elements.join();
+    const changed = now !== this.lastCamera;
+    this.lastCamera = now;
+    return changed;
+  }
 
   resize(container) {
     this.camera.aspect = container.clientWidth / container.clientHeight;
