@@ -116,9 +116,9 @@ def test_posing_the_doll_in_the_browser(tmp_path):
             server.finish()
     assert errors == [], errors
     assert code == 0, err
-    # Input to screen: measured 141 ms here, in headless Chromium drawing with its software
-    # GL at ~13 frames/s (one page frame ~77 ms); bench --live measures the server's part.
-    assert latency["count"] > 10 and latency["p50"] < 500
+    # Input to screen: measured 44-141 ms here, in headless Chromium drawing with its software
+    # GL at 13-40 frames/s beside the server on two cores; bench --live measures both parts.
+    assert latency["count"] > 10 and latency["p50"] < 400
     session = read_session(tmp_path / "s.mcap")
     assert session.complete and len(session.pose_time) > 1000
     live_keys = read_keyframes(tmp_path / "s" / "keyframes.json")[1]
