@@ -10,6 +10,7 @@ import sys
 import threading
 import time
 import webbrowser
+from dataclasses import dataclass
 from pathlib import Path
 
 import click
@@ -25,11 +26,12 @@ from puppetcli.render_camera import parse_view
 from puppetcli.rigfile import load_rig
 from puppetcli.script import DEFAULT_MAX_FORCE, DEFAULT_MAX_TORQUE
 from puppetcli.script_actions import GRIP_DEFAULTS
-from puppetcli.session import METADATA_NAME
-from puppetcli.spidar import preset_from_option
+from puppetcli.session import METADATA_NAME, Workspace
+from puppetcli.spidar import DevicePreset, preset_from_option
 from puppetcli.warmup import warm_up
 from solver.errors import PuppetError
-from solver.model import build_model
+from solver.model import Model, build_model
+from solver.spec import RigSpec
 
 DEFAULT_DEVICE = "SpidarG6X3R"
 MARGIN = 0.3  # m of workspace around the rig at rest
@@ -103,51 +105,77 @@ def command(
     made_outdir = not outdir.exists()
     prepare_outdir(outdir, KEY_OUTPUTS, force)
     model = build_model(spec)
-    lo, hi = scene_bounds(model, spec)
-    box = (lo - MARGIN, hi + MARGIN)
-    corners = np.array([[box[i][0], box[j][1], box[k][2]] for i in (0, 1) for j in (0, 1)
-                        for k in (0, 1)])  # fmt: skip
-    workspace = fit_workspace(corners, dev)
-    radius = FIT_FRACTION * device_reach(dev) * workspace.scale
-    start = _pointer_start(lo, hi, workspace.offset, radius)
+    workspace, radius, start = _fit(model, spec, dev)
     hello = _hello(model, spec, step, dev.name, workspace.offset, radius)
-    recording: list[LiveRecording] = []
+    run = _Run(session, outdir, rig, spec, model, dev, workspace, start, step, view)
+    server = LiveServer(hello, secrets.token_urlsafe(18), (workspace.offset, radius), run.finish,
+                        host, port)  # fmt: skip
+    try:
+        outcome = asyncio.run(server.serve(run.begin, lambda url: _ready(url, host, no_open)))
+    except OSError as exc:
+        if made_outdir and run.live is None:
+            outdir.rmdir()  # nothing was recorded: leave no trace
+        if exc.errno == errno.EADDRINUSE:
+            raise PuppetError(f"{host}:{port} is in use by another program: pick another "
+                              "--port (0 = any free port)") from None  # fmt: skip
+        raise PuppetError(f"{host}:{port}: cannot listen: {exc.strerror}") from None
+    _report(session, outdir, rig, run.live, outcome)
+    if outcome.error is not None:
+        raise outcome.error
 
-    def begin() -> LiveRecording:
-        f = open(session, "wb")  # noqa: SIM115 -- closed by finish(), written as it goes
-        recorder = {"live": True, "rig": model.name, "rig_file": str(rig), "device": dev.name,
-                    "started": time.strftime("%Y-%m-%dT%H:%M:%S%z")}  # fmt: skip
-        live = LiveRecording(spec, f, dev, workspace, step, start, np.array([1.0, 0, 0, 0]),
-                             recorder)  # fmt: skip
-        recording.append(live)
-        warm_up(live.warm_up)
-        return live
 
-    def finish(outcome: Outcome) -> list[str]:
-        live = recording[0]
+@dataclass
+class _Run:
+    """One live session's files: ``begin`` opens and starts the recording once the server
+    listens, ``finish`` completes it and writes the keys' outputs."""
+
+    session: Path
+    outdir: Path
+    rig: Path
+    spec: RigSpec
+    model: Model
+    dev: DevicePreset
+    workspace: Workspace
+    start: np.ndarray
+    step: float | None
+    view: str
+    live: LiveRecording | None = None
+
+    def begin(self) -> LiveRecording:
+        f = open(self.session, "wb")  # noqa: SIM115 -- closed by finish(), written as it goes
+        recorder = {
+            "live": True, "rig": self.model.name, "rig_file": str(self.rig),
+            "device": self.dev.name, "started": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+        }  # fmt: skip
+        self.live = LiveRecording(self.spec, f, self.dev, self.workspace, self.step, self.start,
+                                  np.array([1.0, 0, 0, 0]), recorder)  # fmt: skip
+        warm_up(self.live.warm_up)
+        return self.live
+
+    def finish(self, outcome: Outcome) -> list[str]:
+        live = self.live
         live.writer.add_metadata(f"{METADATA_NAME}.end", {
             "reason": outcome.reason, "time": repr(live.time), "keys": str(len(live.runner.keys)),
             "rejected_messages": str(outcome.rejected),
             "error": "" if outcome.error is None else str(outcome.error),
         })  # fmt: skip
         live.close()
-        written = write_key_outputs(outdir, spec, model.name, list(live.runner.keys), view=view)
-        return [str(session), *(str(p) for p in written)]
+        keys = list(live.runner.keys)
+        written = write_key_outputs(self.outdir, self.spec, self.model.name, keys, view=self.view)
+        return [str(self.session), *(str(p) for p in written)]
 
-    server = LiveServer(hello, secrets.token_urlsafe(18), (workspace.offset, radius), finish,
-                        host, port)  # fmt: skip
-    try:
-        outcome = asyncio.run(server.serve(begin, lambda url: _ready(url, host, no_open)))
-    except OSError as exc:
-        if made_outdir and not recording:
-            outdir.rmdir()  # nothing was recorded: leave no trace
-        if exc.errno == errno.EADDRINUSE:
-            raise PuppetError(f"{host}:{port} is in use by another program: pick another "
-                              "--port (0 = any free port)") from None  # fmt: skip
-        raise PuppetError(f"{host}:{port}: cannot listen: {exc.strerror}") from None
-    _report(session, outdir, rig, recording[0], outcome)
-    if outcome.error is not None:
-        raise outcome.error
+
+def _fit(model: Model, spec: RigSpec, dev: DevicePreset) -> tuple[Workspace, float, np.ndarray]:
+    """The workspace that fits the rig at rest plus ``MARGIN`` in 80 % of the device's reach
+    (as ``record`` fits a script's path), its ball's radius in the world (m), and where the
+    pointer starts."""
+    lo, hi = scene_bounds(model, spec)
+    box = (lo - MARGIN, hi + MARGIN)
+    corners = np.array([[box[i][0], box[j][1], box[k][2]] for i in (0, 1) for j in (0, 1)
+                        for k in (0, 1)])  # fmt: skip
+    workspace = fit_workspace(corners, dev)
+    radius = FIT_FRACTION * device_reach(dev) * workspace.scale
+    return workspace, radius, _pointer_start(lo, hi, workspace.offset, radius)
 
 
 def _hello(model, spec, step, device: str, centre, radius: float) -> dict:
