@@ -19,7 +19,7 @@ __all__ = ["NOTICE_AFTER", "warm_up"]
 
 NOTICE_AFTER = 2.0  # s: loading the cache takes ~0.5 s; longer means compiling
 COMPILING = (
-    "compiling the solver: the first run on this machine takes about 3 minutes "
+    "compiling the solver: the first run on this machine takes 2-3 minutes "
     "(later runs load it in under a second)"
 )
 

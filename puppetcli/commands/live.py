@@ -86,7 +86,7 @@ def command(
     """Pose the doll on RIG by hand in the browser, recorded as a session.
 
     Starts a local web server and opens its page: drag a bone to pull it, Shift+drag
-    to turn it, K to take a key, ? for every control.  The physics runs here in real
+    to grip it whole and turn it, K to take a key, ? for every control.  The physics runs here in real
     time.  Stop with the page's Stop button, Ctrl-C, or by closing the page: the session
     (written as it goes, so a crash loses at most the last second) is completed, and
     keyframes.json, keyframes.bvh, keys/ and sheet.png are written next to it.  Replay
