@@ -234,3 +234,26 @@ def test_the_live_benchmark_reports_every_figure():
     values = [row.rtf, row.headroom, row.step_us, row.fps, row.latency_p50, row.latency_p95]
     assert all(v > 0 and v == v for v in values)  # measured, finite (no timing asserted)
     assert format_live([row]).splitlines()[1].split()[0] == "0.005"
+
+
+def test_a_step_that_cannot_keep_up_is_reported(tmp_path):
+    """At h = 0.1 ms the doll cannot run in real time here: the frames say so (behind, a
+    real-time factor under 1) while the physics goes on, slower."""
+    server = Live(tmp_path / "slow.mcap", "--h", "0.0001")
+
+    async def watch() -> tuple[dict, dict]:
+        async with (
+            aiohttp.ClientSession() as http,
+            http.ws_connect(server.ws_url, origin=server.base) as ws,
+        ):
+            first = json.loads((await ws.receive()).data)["frame"]
+            end = time.monotonic() + 2.0
+            return first, await frames_until(ws, lambda f: time.monotonic() > end)
+
+    try:
+        first, last = asyncio.run(watch())
+    finally:
+        code, _, err = server.finish()
+    assert code == 0, err
+    assert last["stats"]["behind"] and last["stats"]["rtf"] < 0.95  # measured 0.18
+    assert last["t"] > first["t"]  # slower, not stopped
