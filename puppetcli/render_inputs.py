@@ -13,7 +13,8 @@
   rotations from ``/tf`` (composed down the tree; without ``/tf``, the shortest
   arc from the rest axis, which loses a box's twist), the pointer and its
   coupling line from ``/puppet/pointer``.  Key moments are the
-  ``/puppet/keyframe`` events, each shown with the recorded step nearest to it.
+  ``/puppet/keyframe`` events, each shown with the recorded step nearest to it (an
+  ``undo`` event drops the latest).
 
 Every input needs the rig (``--rig``) for bone shapes, props and the ground.
 """
@@ -229,6 +230,9 @@ def _key_moments(steps: list[Pose], events: list[tuple[int, dict]]) -> list[Pose
     times = [p.time for p in steps]
     out = []
     for ns, event in events:
+        if isinstance(event, dict) and event.get("undo") is True:
+            del out[-1:]  # the latest key was dropped
+            continue
         t = ns / 1e9
         j = bisect.bisect_left(times, t)
         near = [k for k in (j - 1, j) if 0 <= k < len(steps)]

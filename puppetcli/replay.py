@@ -29,7 +29,8 @@ from pathlib import Path
 import numpy as np
 
 from puppetcli.errors import ScriptError, SessionError
-from puppetcli.runner import Runner, TouchMode, UndoKey, Until
+from puppetcli.runner import Runner, TouchMode, UndoKey, Until, script_model
+from puppetcli.runtrace import RunTrace
 from puppetcli.script import Key, Push, Script
 from puppetcli.script_actions import GRIP_DEFAULTS, Expect, Grip, Release, frozen_vector
 from puppetcli.session import Event, Session, read_session
@@ -44,7 +45,7 @@ from puppetcli.spidar import (
 from puppetcli.spidar.strings import MIN_LENGTH
 from puppetcli.yamldoc import did_you_mean
 from solver import quat, quat1
-from solver.model import Model
+from solver.model import Model, build_model
 from solver.spec import RigSpec
 from solver.state import StepInput, StepReport
 
@@ -56,6 +57,7 @@ __all__ = [
     "TrackLookup",
     "estimate_track",
     "load_replay",
+    "replay_traced",
 ]
 
 WARMUP_TICKS = 2000  # at most 2 s of the first sample before the recording starts
@@ -302,6 +304,17 @@ def load_replay(path: Path, spec: RigSpec) -> Replay:
     session = read_session(path)
     track = estimate_track(session)
     return Replay(session, session_script(session, track), track)
+
+
+def replay_traced(path: Path, spec: RigSpec, trace_path: Path):
+    """Replay the session at ``path`` on the rig, tracing every step (and the device's
+    channels) into ``trace_path``: (the Replay, the run's ``RunResult``)."""
+    replay = load_replay(path, spec)
+    model = script_model(build_model(spec), replay.script)
+    runner = replay.runner(model)
+    with RunTrace(trace_path, model, replay.script, 1, runner.pointer_on, spidar=True) as trace:
+        runner.trace = trace
+        return replay, runner.run()
 
 
 class SessionRunner(Runner):

@@ -171,8 +171,15 @@ class Runner:
                 a.time - self.state.time + 0.5 * self.model.options.h - EVENT_SLACK
             ),
             TouchMode: self._touch_mode,
-            UndoKey: lambda a: self.keys.pop() if len(self.keys) else None,
+            UndoKey: self._undo,
         }
+
+    def _undo(self, action: UndoKey) -> None:
+        if not len(self.keys):
+            return
+        key = self.keys.pop()
+        if self.trace is not None:
+            self.trace.keyframe(self.state.time, key.label, action.line, len(self.keys) + 1, True)
 
     def _touch_mode(self, action: TouchMode) -> None:
         self.touch_enabled = action.on

@@ -88,10 +88,10 @@ class RunTrace:
     def __exit__(self, *exc) -> None:
         self.writer.__exit__(*exc)
 
-    def keyframe(self, t: float, label: str, line: int, index: int) -> None:
-        self.writer.write(
-            "/puppet/keyframe", t, {"t": t, "label": label, "line": line, "index": index}
-        )
+    def keyframe(self, t: float, label: str, line: int, index: int, undo: bool = False) -> None:
+        """A key taken (``index`` from 1), or with ``undo`` the key ``index`` dropped."""
+        event = {"t": t, "label": label, "line": line, "index": index}
+        self.writer.write("/puppet/keyframe", t, event | ({"undo": True} if undo else {}))
 
     def step(self, s: State, report: StepReport, inp: StepInput, coupling: Coupling | None,
              requested: tuple, displayed: tuple) -> None:  # fmt: skip

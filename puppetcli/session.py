@@ -43,6 +43,7 @@ __all__ = [
     "Event",
     "Session",
     "Workspace",
+    "is_session",
     "read_session",
     "write_session",
 ]
@@ -291,6 +292,23 @@ def read_session(path: Path) -> Session:
         raise SessionError(f"{path}: cannot read: {exc.strerror}") from exc
     _check_channels(path, summary)
     return _build(path, meta, raw, complete)
+
+
+def is_session(path: Path) -> bool:
+    """Whether ``path`` is an MCAP file with a ``puppetcli.session`` record (a recorded
+    session, not a trace); False for a file that is neither readable nor one."""
+    try:
+        with open(path, "rb") as f:
+            try:
+                return METADATA_NAME in [m.name for m in make_reader(f).iter_metadata()]
+            except READ_ERRORS:  # no summary (a killed recording): its record comes first
+                f.seek(0)
+                for record in StreamReader(f, emit_chunks=True).records:
+                    if isinstance(record, Metadata):
+                        return record.name == METADATA_NAME
+    except (OSError, *READ_ERRORS):
+        pass
+    return False
 
 
 def _read_indexed(path: Path, f) -> tuple[dict[str, str], Any, list]:

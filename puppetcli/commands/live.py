@@ -86,11 +86,11 @@ def command(
     """Pose the doll on RIG by hand in the browser, recorded as a session.
 
     Starts a local web server and opens its page: drag a bone to pull it, Shift+drag
-    to grip it whole and turn it, K to take a key, ? for every control.  The physics runs here in real
-    time.  Stop with the page's Stop button, Ctrl-C, or by closing the page: the session
-    (written as it goes, so a crash loses at most the last second) is completed, and
-    keyframes.json, keyframes.bvh, keys/ and sheet.png are written next to it.  Replay
-    it with `puppetcli pose RIG SESSION.mcap`.
+    to grip it whole and turn it, K to take a key, ? for every control.  The physics
+    runs here in real time.  Stop with the page's Stop button, Ctrl-C, or by closing
+    the page: the session (written as it goes, so a crash loses at most the last
+    second) is completed, and keyframes.json, keyframes.bvh, keys/ and sheet.png are
+    written next to it.  Replay it with `puppetcli pose RIG SESSION.mcap`.
     """
     session = session or Path(time.strftime("live-%Y%m%d-%H%M%S.mcap"))
     if session.suffix.lower() != ".mcap":

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import sys
+import tempfile
 from pathlib import Path
 
 import click
@@ -12,7 +13,9 @@ from puppetcli.outputs import OutputError
 from puppetcli.render import contact_sheet, default_cols, frame_poses, render_pose, write_png
 from puppetcli.render_camera import RenderError, parse_size, parse_view
 from puppetcli.render_inputs import input_kind, key_poses, trace_poses
+from puppetcli.replay import replay_traced
 from puppetcli.rigfile import load_rig
+from puppetcli.session import is_session
 from puppetcli.skeleton import Skeleton
 
 
@@ -42,7 +45,7 @@ from puppetcli.skeleton import Skeleton
 @click.option(
     "--video",
     type=click.Path(dir_okay=False, path_type=Path),
-    help="With a trace.mcap INPUT: a video of every step (.mp4 mp4v or .avi MJPG).",
+    help="With a trace or session .mcap INPUT: a video of every step (.mp4 mp4v or .avi MJPG).",
 )
 @click.option("--fps", type=float, default=30.0, show_default=True, help="Video frame rate.")
 @click.option("--force", is_flag=True, help="Overwrite existing output files.")
@@ -59,8 +62,9 @@ def command(
 ) -> None:
     """Draw poses: a contact sheet of keys, or a video of a trace.
 
-    INPUT is keyframes.json, a .bvh file (when a BVH reader exists) or a
-    trace.mcap (sheet: its key moments; --video: every step).  All panels share
+    INPUT is keyframes.json, a .bvh file (when a BVH reader exists), a
+    trace.mcap (sheet: its key moments; --video: every step) or a recorded
+    session .mcap (replayed first, then drawn as its trace).  All panels share
     one perspective camera fitted to all poses, so they compare directly.
     Existing outputs are kept unless --force.
     """
@@ -68,7 +72,9 @@ def command(
     kind = _check_request(input_path, sheet, rig, cols, video, fps, force)
     spec = load_rig(rig)
     skel = Skeleton.from_spec(spec)
-    if kind == "trace":
+    if kind == "trace" and is_session(input_path):
+        steps, poses = _session_poses(input_path, spec, skel)
+    elif kind == "trace":
         steps, poses = trace_poses(input_path, skel)
     else:
         steps, poses = [], key_poses(input_path, kind, skel)
@@ -111,6 +117,17 @@ def _check_request(
         if out is not None and not force and (out.exists() or out.is_symlink()):
             raise OutputError(f"{out} exists: pass --force to overwrite")
     return kind
+
+
+def _session_poses(path: Path, spec, skel: Skeleton):
+    """(every step, the keys) of a recorded session, replayed into a trace first."""
+    with tempfile.TemporaryDirectory() as tmp:
+        replay, result = replay_traced(path, spec, Path(tmp) / "trace.mcap")
+        if replay.warning:
+            click.echo(f"warning: {replay.warning}", err=True)
+        if result.error is not None:
+            raise result.error
+        return trace_poses(Path(tmp) / "trace.mcap", skel)
 
 
 def _mkdir(path: Path) -> None:

@@ -280,8 +280,8 @@ class _Tap:
         self.tensions = shown
         self.writer.add("/spidar/tensions", s.time, tensions_message(s.time, shown, wanted))
 
-    def keyframe(self, t: float, label: str, line: int, index: int) -> None:
-        """A key is recorded by its button event."""
+    def keyframe(self, t: float, label: str, line: int, index: int, undo: bool = False) -> None:
+        """A key (or its undo) is recorded by its button event."""
 
 
 class NothingInReach(Exception):

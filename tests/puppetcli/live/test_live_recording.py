@@ -19,7 +19,7 @@ from puppetcli.keyframes import read_keyframes
 from puppetcli.live.recording import Grip, Key, LiveRecording, Release, Touch, Undo
 from puppetcli.record import fit_workspace
 from puppetcli.rigfile import load_rig
-from puppetcli.session import read_session
+from puppetcli.session import is_session, read_session
 from puppetcli.spidar import preset
 from solver.observe import bone_heads, bone_tails
 
@@ -180,3 +180,19 @@ def test_touching_follows_the_touch_switch(tmp_path):
     assert sweep(None) == 0.0
     assert sweep(0.25) > 50.0  # measured 594 N at 1 m/s: the ball strikes the forearm
     assert sweep(0.0) == 0.0  # switched on inside the forearm: suspended until clear
+
+
+def test_render_draws_a_session_as_its_replay(recorded):
+    """`render SESSION.mcap` replays the session and draws its keys (a sheet) and every step
+    (a video); a killed one too, with the warning; a trace is not taken for a session."""
+    tmp, path, live_keys = recorded
+    args = ["render", str(path), "--rig", str(DOLL), "-o", str(tmp / "sheet.png")]
+    result = CliRunner().invoke(cli, [*args, "--video", str(tmp / "s.avi")])
+    assert result.exit_code == 0, result.output
+    assert f"{tmp / 'sheet.png'}: {len(live_keys)} panels" in result.output
+    assert "frames at 30 fps" in result.output and (tmp / "s.avi").stat().st_size > 0
+    killed = CliRunner().invoke(cli, ["render", str(tmp / "killed.mcap"), "--rig", str(DOLL),
+                                      "-o", str(tmp / "killed.png")])  # fmt: skip
+    assert killed.exit_code == 0 and "the recording ended abruptly" in killed.stderr
+    assert is_session(path) and is_session(tmp / "killed.mcap")
+    assert not is_session(tmp / "traced" / "trace.mcap") and not is_session(DOLL)
