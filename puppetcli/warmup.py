@@ -15,7 +15,7 @@ from collections.abc import Callable
 
 import click
 
-__all__ = ["NOTICE_AFTER", "warm_up"]
+__all__ = ["NOTICE_AFTER", "warm_up", "warm_up_step"]
 
 NOTICE_AFTER = 2.0  # s: loading the cache takes ~0.5 s; longer means compiling
 COMPILING = (
@@ -37,3 +37,11 @@ def warm_up(prepare: Callable[[], object]) -> None:
     took = time.perf_counter() - started
     if took > NOTICE_AFTER:
         click.echo(f"solver ready ({took:.0f} s)", err=True)
+
+
+def warm_up_step(model) -> None:
+    """``warm_up`` with one throwaway compiled step of ``model`` from rest."""
+    from solver.fast import fast_step
+    from solver.state import StepInput, initial_state
+
+    warm_up(lambda: fast_step(model, initial_state(model), StepInput()))

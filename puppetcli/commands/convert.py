@@ -19,6 +19,7 @@ from puppetcli.rigfile import load_rig
 from puppetcli.runner import Runner, script_model
 from puppetcli.script import load_script
 from puppetcli.skeleton import Skeleton
+from puppetcli.warmup import warm_up_step
 from solver.model import Model, build_model
 from solver.state import State
 
@@ -72,6 +73,7 @@ def command(
             f"{source}: expected at most {MAX_STEPS:,} steps, got {_total_steps(model, plan):,} "
             f"(duration over step h = {model.options.h:g} s)"
         )
+    warm_up_step(model)
     runner = replay.runner(model) if replay is not None else Runner(model, plan)
     sampler = FrameSampler(model, fps, runner.state) if fps is not None else None
     with _progress(_total_steps(model, plan)) as tick:

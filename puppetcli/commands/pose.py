@@ -17,10 +17,8 @@ from puppetcli.rigfile import load_rig
 from puppetcli.runner import Runner, RunResult, script_model
 from puppetcli.runtrace import RunTrace
 from puppetcli.script import load_script
-from puppetcli.warmup import warm_up
-from solver.fast import fast_step
+from puppetcli.warmup import warm_up_step
 from solver.model import build_model
-from solver.state import StepInput, initial_state
 
 OUTPUTS = ["keyframes.json", "keyframes.bvh", "trace.mcap", "sheet.png", "keys"]
 MAX_STEPS = 10_000_000  # a run longer than this is a mistake in the script (h or a duration)
@@ -155,7 +153,7 @@ def _check_length(script: Path, plan, h: float) -> None:
 def _run(
     model, plan, outdir: Path, trace_every: int, no_trace: bool, replay: Replay | None = None
 ) -> RunResult:
-    warm_up(lambda: fast_step(model, initial_state(model), StepInput()))
+    warm_up_step(model)
     total = max(plan.duration or 0.0, _timeline_length(plan))
     with _progress(round(total / model.options.h)) as tick:
         if replay is not None:
