@@ -233,3 +233,54 @@ def test_valid_doc_reads(tmp_path: Path) -> None:
     rig, keys = read_keyframes(path)
     assert rig == "doll" and [k.label for k in keys] == ["a", "b"]
     assert np.array_equal(keys[1].bones["l.arm"].local, [0.0, 0.0, 1.0, 0.0])
+
+
+def test_written_files_follow_the_shipped_schema(tmp_path: Path) -> None:
+    """The writer's output validates against puppetcli/schemas/puppetcli.Keyframes.json (a
+    third-party validator), and the schema is not vacuous: broken copies fail it."""
+    jsonschema = pytest.importorskip("jsonschema")
+    from puppetcli.trace import load_schema
+
+    rng = np.random.default_rng(4)
+    path = tmp_path / "keyframes.json"
+    write_keyframes(path, "doll", [make_key(rng, 0.5, "a", line=3), make_key(rng, 1.0, "b")])
+    validator = jsonschema.Draft202012Validator(load_schema("puppetcli.Keyframes"))
+    doc = json.loads(path.read_text())
+    assert list(validator.iter_errors(doc)) == []
+    broken = []
+    for change in (
+        lambda d: d["keys"][0]["bones"]["hips"]["rotation"].pop(),  # 3 components
+        lambda d: d["keys"][1]["bones"]["spine"].pop("local"),
+        lambda d: d["keys"][0].pop("time"),
+        lambda d: d["keys"][0]["bones"]["hips"]["head"].__setitem__(0, "0"),
+        lambda d: d.__setitem__("rig", 7),
+    ):
+        bad = copy.deepcopy(doc)
+        change(bad)
+        broken.append(bool(list(validator.iter_errors(bad))))
+    assert broken == [True] * 5
+
+
+def test_a_known_rotation_is_written_scalar_first(tmp_path: Path) -> None:
+    """A bone turned by a non-symmetric rotation (ZXY Euler 30°, −20°, 45°) is written, as raw
+    numbers in the file, as scipy's scalar-first quaternion of that rotation (w ≥ 0)."""
+    from scipy.spatial.transform import Rotation
+
+    from puppetcli.rigfile import load_rig
+    from puppetcli.snapshot import capture
+    from solver.model import build_model
+    from solver.state import initial_state
+
+    root = Path(__file__).resolve().parents[2]
+    model = build_model(load_rig(root / "rigs/doll.yaml"))
+    state = initial_state(model)
+    b = model.bone_names.index("forearm_l")
+    turn = Rotation.from_euler("ZXY", [30.0, -20.0, 45.0], degrees=True)
+    expected = turn.as_quat(scalar_first=True)
+    expected = expected if expected[0] >= 0 else -expected
+    state.body_quat[b] = expected
+    path = tmp_path / "keyframes.json"
+    write_keyframes(path, "doll", [capture(model, state, "turned", {})])
+    written = json.loads(path.read_text())["keys"][0]["bones"]["forearm_l"]["rotation"]
+    np.testing.assert_allclose(written, expected, rtol=0, atol=1e-15)  # measured: equal
+    assert abs(written[0] - np.cos(turn.magnitude() / 2)) < 1e-15  # w is the scalar part
