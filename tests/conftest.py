@@ -4,3 +4,20 @@ BLAS runs single-threaded as in the CLI (see solver/__init__.py)."""
 import os
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+
+def pytest_runtest_setup(item):
+    """Tests marked ``peers`` compare with MuJoCo: without it they are skipped, except in CI
+    (the CI environment variable set), where a missing peer is a failure, never a silent
+    skip.  ``pytest -m "not peers"`` leaves them out on purpose."""
+    if item.get_closest_marker("peers") is None:
+        return
+    try:
+        import mujoco  # noqa: F401
+    except ImportError:
+        import pytest
+
+        why = "needs MuJoCo, the peer engine (pip install -e '.[test]')"
+        if os.environ.get("CI"):
+            pytest.fail(f"{item.nodeid}: {why}")
+        pytest.skip(why)

@@ -75,8 +75,8 @@ def test_measure_rows_against_the_numpy_baseline(tiny_rows):
     assert _by(tiny_rows, "doll-joints", "pgs", "fast").contacts == 0
 
 
+@pytest.mark.peers
 def test_peers_rows_sit_beside_ours():
-    pytest.importorskip("mujoco")
     rows = measure({"doll": bench.doll_scenes()["doll"]}, [0.02], ["pgs"], 0.1, peers=True)
     euler = _by(rows, "doll", "euler", "mujoco")
     _by(rows, "doll", "implicitfast", "mujoco")

@@ -150,8 +150,8 @@ def test_our_doll_stays_stable_and_follows_the_grip_at_50_ms():
     assert r["max_speed"] < 2 * POINTER_PEAK
 
 
+@pytest.mark.peers
 def test_mujoco_rows_join_the_study():
-    pytest.importorskip("mujoco")
     rows = peer_rows(("doll", "chain"), [0.02], quick=True)
     names = {(r.scene, r.setting) for r in rows}
     assert names == {
