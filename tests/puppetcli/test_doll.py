@@ -66,4 +66,4 @@ def test_doll_without_yield_creeps_at_the_rate_torque_over_dd():
     torque = arm_gravity_torque(model, samples[0.5 * (t0 + t1)][1])
     expected = torque / model.joint_dd[j]
     assert abs(expected[2]) > 0.1  # the arm sags measurably (rad/s about the chest's z)
-    assert rate[2] == pytest.approx(expected[2], rel=0.05)
+    assert rate[2] == pytest.approx(expected[2], rel=0.05)  # measured 2.0 % (elastic part)

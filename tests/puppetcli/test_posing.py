@@ -97,7 +97,7 @@ def test_pure_voigt_joint_returns_to_rest_but_for_its_gravity_sag():
         for b in (model.bone_names.index("forearm_l"), model.bone_names.index("hand_l"))
     )
     sag = np.linalg.norm(torque) / model.joint_kf[j, 0]  # static Voigt deflection τ/K_f
-    assert np.linalg.norm(after) == pytest.approx(sag, rel=0.1)
+    assert np.linalg.norm(after) == pytest.approx(sag, rel=1e-3)  # measured 2.0e-4
     assert np.linalg.norm(after) < 0.4 * np.linalg.norm(released)
 
 
@@ -107,7 +107,8 @@ def test_twisting_the_gripped_hand_twists_the_wrist():
         "actions:\n  - grip: hand_l\n  - twist: {angle: 45, duration: 1.0}\n  - wait: 0.5\n"
     )
     rot = np.degrees(joint_rotations(model, runner.state)[model.joint_names.index("hand_l")])
-    assert rot[0] == pytest.approx(45.0, abs=5.0)  # about the forearm's axis (+x at rest)
+    # about the forearm's axis (+x at rest); measured 42.2°: the couplings' compliance
+    assert rot[0] == pytest.approx(45.0, abs=5.0)
     assert np.hypot(rot[1], rot[2]) < 3.0
 
 
@@ -135,5 +136,5 @@ def test_hand_pushed_onto_the_table_stops_on_it():
     )
     runner.run()
     table_top = 1.2
-    assert min(lowest) > table_top - 0.002  # penetration under 2 mm
+    assert min(lowest) > table_top - 6e-4  # penetration measured 0.13 mm (slop 0.5 mm)
     assert min(lowest) < table_top + 0.005  # and it did reach the table

@@ -43,9 +43,9 @@ def run(spec: RigSpec, seconds: float):
     return state, np.array(trail)
 
 
-# Stated tolerance: a body resting on the ground sinks at most 2 mm (the solver
-# keeps penetration near the 0.5 mm slop).
-SINK_TOLERANCE = 0.002
+# A capsule resting on the ground sinks 3e-9, 1.6e-8 and 7.3e-8 m at h = 1, 5, 20 ms
+# (measured): the contact rows hold it exactly but for the 1e-6 regularisation.
+SINK_TOLERANCE = 4e-7
 
 
 @pytest.mark.parametrize("h", [0.001, 0.005, 0.02])
@@ -84,4 +84,4 @@ def test_box_on_a_slope_slides_above_the_friction_angle_at_the_coulomb_rate():
     mu, t = 0.5, 1.0
     theta, slide = slope_run(0.6, mu, t)
     expected = 0.5 * G * (np.sin(theta) - mu * np.cos(theta)) * t * t
-    assert slide[-1] == pytest.approx(expected, rel=0.03)
+    assert slide[-1] == pytest.approx(expected, rel=0.01)  # measured 0.2 %
