@@ -17,9 +17,11 @@ export class Hud {
     $('pause-btn').onclick = () => this.togglePause();
     $('touch-btn').onclick = () => link.send({ type: 'touch', on: !this.frame?.touch });
     $('posonly-btn').onclick = () => link.send({ type: 'position_only', on: !this.frame?.position_only });
-    $('release-btn').onclick = () => link.send({ type: 'release' });
+    $('release-btn').onclick = () => this.onRelease();
     $('help-btn').onclick = () => this.toggleHelp();
     $('stop-btn').onclick = () => this.stop();
+    // A clicked button gives the focus back, so Space / Enter stay shortcuts (not a second click).
+    for (const b of document.querySelectorAll('button')) b.addEventListener('click', () => b.blur());
     $('help').onclick = () => this.hideHelp();
     if (localStorage.getItem('puppetcli-help-seen')) this.hideHelp();
     else setTimeout(() => this.hideHelp(), 8000);
@@ -44,21 +46,21 @@ export class Hud {
   update(frame, info) {
     this.frame = frame;
     const s = frame.stats, h = this.hello;
-    const lat = this.link.latency();
+    const lat = this.link.median(50), rtt = this.link.rtt;
     const mode = frame.grip ? `grip ${frame.grip.bone}` : frame.touch ? 'touch' : 'free';
     $('hud').textContent = [
       `${h.rig}  t = ${fmt(frame.t, 3)} s${frame.paused ? '  PAUSED' : ''}`,
       `real time ×${fmt(s.rtf)}   headroom ×${fmt(s.headroom, 1)}`,
       `${fmt(s.steps_per_s, 0)} steps/s of ${h.h * 1000} ms, ${fmt(s.step_us, 0)} µs a step`,
       `${s.solver}, ${s.rows} rows, ${s.contacts} contacts`,
-      `input latency ${fmt(lat.p50, 0)} ms`,
+      `input latency ${fmt(lat, 0)} ms (median of 50)${rtt === null ? '' : `, socket ${fmt(rtt, 0)} ms`}`,
       `mode: ${mode}, position-only ${frame.position_only ? 'on' : 'off'}`,
       info.pad ? `3D mouse: ${info.pad}` : '',
       s.rejected ? `rejected messages: ${s.rejected}` : '',
-      this.link.connected ? '' : 'DISCONNECTED: retrying…',
     ].filter(Boolean).join('\n');
-    this.gauge('force', frame.wrench.force, h.haptics.max_force, 'N', 1);
-    this.gauge('torque', frame.wrench.torque, h.haptics.max_torque, 'N·m', 2);
+    const w = frame.wrench;
+    this.gauge('force', w.force, w.requested_force, h.haptics.max_force, 'N', 1);
+    this.gauge('torque', w.torque, w.requested_torque, h.haptics.max_torque, 'N·m', 2);
     const slow = !frame.paused && (s.behind || s.rtf < 0.95);
     $('banner').hidden = !slow;
     if (slow) $('banner').textContent = `Physics slower than real time (×${fmt(s.rtf)}): the doll moves slowly`;
@@ -68,27 +70,35 @@ export class Hud {
     $('posonly-btn').textContent = `Position only: ${frame.position_only ? 'on' : 'off'} (O)`;
   }
 
-  gauge(name, v, max, unit, digits) {
+  // A bar |v| / max that turns red at the clamp (the device displays less than requested).
+  gauge(name, v, requested, max, unit, digits) {
     const size = Math.hypot(...v);
+    const wanted = requested ? Math.hypot(...requested) : size;
     const bar = $(`${name}-bar`);
     bar.style.width = `${Math.min(100, (100 * size) / max)}%`;
-    bar.classList.toggle('clamped', size >= 0.999 * max);
+    bar.classList.toggle('clamped', size >= 0.999 * max || wanted > max * 1.001);
     $(`${name}-num`).textContent = `${size.toFixed(digits)} ${unit}`;
   }
 
-  keys(list) {
+  // The keys panel. fresh: the list follows a change made now (a key taken), so a key without
+  // a picture gets the next rendered view; the list of a hello (a reload, a reconnect) has
+  // keys taken earlier, whose pose is not on screen any more: they get no picture.
+  keys(list, fresh = true) {
     this.list = list;
-    const ol = $('key-list');
-    ol.replaceChildren();
+    this.wanted = [];
+    const ul = $('key-list');
+    ul.replaceChildren();
     for (const key of list) {
       const id = `${key.index} ${key.label} ${key.t}`;
       const li = document.createElement('li');
-      const img = document.createElement('img');
-      img.alt = key.label;
-      if (this.thumbs.has(id)) img.src = this.thumbs.get(id);
-      else this.wanted.push({ id, img });
-      li.append(img, `${key.label}  (t = ${key.t.toFixed(3)} s)`);
-      ol.append(li);
+      let pic = document.createElement('img');
+      pic.alt = key.label;
+      if (this.thumbs.has(id)) pic.src = this.thumbs.get(id);
+      else if (fresh) this.wanted.push({ id, img: pic });
+      else pic = Object.assign(document.createElement('div'), { className: 'nopic', textContent: 'no picture' });
+      const index = Object.assign(document.createElement('b'), { textContent: `#${key.index} ` });
+      li.append(pic, index, `${key.label}  (t = ${Number(key.t).toFixed(3)} s)`);
+      ul.append(li);
     }
   }
 
@@ -109,12 +119,23 @@ export class Hud {
     setTimeout(() => div.remove(), 4000);
   }
 
+  // The session is over: say where it was saved and take no more input.
   end(msg) {
     this.stopped = msg;
-    const lines = [`${msg.keys} keys. Session: ${msg.session}`, ...msg.outputs];
-    $('stopped-text').replaceChildren(...lines.map((t) => Object.assign(document.createElement('div'), { textContent: t })));
+    const line = (t, tag = 'div') => Object.assign(document.createElement(tag), { textContent: t });
+    const outputs = document.createElement('ul');
+    outputs.append(...(msg.outputs || []).map((t) => line(t, 'li')));
+    $('stopped-text').replaceChildren(line(`Session saved to ${msg.session} (${msg.keys} keys)`), outputs);
     $('stopped').hidden = false;
+    this.hideHelp();
+    for (const el of document.querySelectorAll('button, input')) el.disabled = true;
+  }
+
+  // The HUD's own mark of the connection (the page also shows a "disconnected" box).
+  connection(up) {
+    $('hud').classList.toggle('offline', !up);
   }
 
   onKey() { /* set by main */ }
+  onRelease() { /* set by main */ }
 }

@@ -5,6 +5,12 @@ import * as THREE from 'three';
 const DEG = Math.PI / 180;
 const DEPTH_STEP = 0.015; // m per wheel notch
 const TURN_PER_PIXEL = 0.5 * DEG;
+const PAD_DEAD = 0.08, PAD_SPEED = 0.4, PAD_TURN = 90 * DEG; // m/s and rad/s at full deflection
+// Which way a 3D mouse's axes 0-2 (and 3-5, about the same axes) point, in camera terms:
+// +1 along the camera's right, up and towards-the-viewer axes.  Flip a sign here for a
+// device that reports another convention.
+const PAD_SIGNS = [1, 1, 1];
+const REPEATS = new Set(['ArrowLeft', 'ArrowRight', 'ArrowUp', 'ArrowDown', 'PageUp', 'PageDown', 'q', 'e']);
 
 export class Input {
   constructor(view, link, ui) {
@@ -12,21 +18,34 @@ export class Input {
     this.pos = new THREE.Vector3();
     this.quat = new THREE.Quaternion();
     this.dirty = false;
-    this.lastPointerSeq = 0;
+    this.lastPointerSeq = 0; // seq of the last message that set the target (pointer, grip at a point)
     this.drag = null; // {mode: 'grip'|'touch', plane, offset, x, y}
     this.held = false; // gripping by G (no button held)
     this.frame = null;
     this.bind();
   }
 
+  // A new frame: once the server has applied the page's last target, its target (clamped
+  // into the workspace) is the page's.  A G grip that found nothing in reach ends here.
   adopt(frame) {
     this.frame = frame;
-    const mine = this.drag || this.held || this.dirty || frame.ack < this.lastPointerSeq;
-    if (!mine) {
+    if (!this.dirty && frame.ack >= this.lastPointerSeq) {
       this.pos.fromArray(frame.target.pos);
       const q = frame.target.quat;
       this.quat.set(q[1], q[2], q[3], q[0]);
     }
+    if (this.held && !frame.grip && frame.ack >= this.holdSeq) this.held = false;
+    const buttons = this.view.controls.mouseButtons;
+    buttons.RIGHT = frame.touch ? THREE.MOUSE.ROTATE : THREE.MOUSE.PAN; // touch: left drag is the pointer's
+  }
+
+  // A new connection (hello): nothing is held or waits for an ack any more.
+  reset() {
+    this.drag = null;
+    this.held = false;
+    this.dirty = false;
+    this.lastPointerSeq = 0;
+    this.view.controls.enabled = true;
   }
 
   flush() {
@@ -79,6 +98,7 @@ export class Input {
       const grip = { type: 'grip', bone: hit.bone, point: hit.point.toArray() };
       if (e.shiftKey) grip.position_only = false; // Shift+press: hold the whole bone, to turn it
       this.command(grip);
+      this.lastPointerSeq = this.link.seq;
     }
     const plane = this.planeThrough(this.pos);
     const onPlane = this.view.rayAt(e.clientX, e.clientY).ray.intersectPlane(plane, new THREE.Vector3());
@@ -122,17 +142,23 @@ export class Input {
   }
 
   key(e) {
-    if (e.target instanceof HTMLInputElement || this.ui.stopped) {
-      if (e.key === 'Enter' && e.target.id === 'label') { this.takeKey(); e.preventDefault(); }
+    if (this.ui.stopped) return;
+    if (e.target instanceof HTMLInputElement || e.target instanceof HTMLTextAreaElement || e.target.isContentEditable) {
+      if (e.target.id !== 'label') return;
+      if (e.key === 'Enter') { this.takeKey(); e.target.blur(); e.preventDefault(); }
+      if (e.key === 'Escape') e.target.blur();
       return;
     }
     const k = e.key.length === 1 ? e.key.toLowerCase() : e.key;
+    if (e.altKey || e.metaKey || (e.ctrlKey && k !== 'z')) return; // the browser's own shortcuts
+    if (e.repeat && !REPEATS.has(k)) return; // a held K takes one key, a held Space one pause
     const step = e.shiftKey ? 0.05 : 0.01;
     const { forward, up, right } = this.cameraAxes();
     const actions = {
       k: () => this.takeKey(), Enter: () => this.takeKey(),
       u: () => this.command({ type: 'undo' }),
       z: () => e.ctrlKey && this.command({ type: 'undo' }),
+      '/': () => e.shiftKey && this.ui.toggleHelp(), // "?" on layouts that report the unshifted key
       ' ': () => this.ui.togglePause(), p: () => this.ui.togglePause(),
       g: () => this.toggleHold(), r: () => this.release(), Escape: () => { this.release(); this.ui.hideHelp(); },
       t: () => this.command({ type: 'touch', on: !(this.frame && this.frame.touch) }),
@@ -155,31 +181,35 @@ export class Input {
   }
 
   toggleHold() {
-    if (this.frame && this.frame.grip) { this.release(); return; }
+    if ((this.frame && this.frame.grip) || this.held) { this.release(); return; }
     this.command({ type: 'grip' });
     this.held = true;
+    this.holdSeq = this.link.seq;
   }
 
-  release() {
-    if (this.frame && this.frame.grip) this.command({ type: 'release' });
+  // Let go (send: tell the server; not after the session stopped).
+  release(send = true) {
+    if (send && ((this.frame && this.frame.grip) || this.held || this.drag)) this.command({ type: 'release' });
     this.held = false;
     this.drag = null;
     this.view.controls.enabled = true;
   }
 
-  // A 3D mouse or gamepad: axes 0-2 move (m/s at full deflection), 3-5 turn (rad/s).
+  // A 3D mouse (a gamepad with >= 6 axes): axes 0-2 move the target along the camera's right,
+  // up and towards-the-viewer axes, 3-5 turn it about them; button 0 grips / lets go, 1 keys.
   poll(dt) {
     const pad = [...(navigator.getGamepads ? navigator.getGamepads() : [])].find((g) => g && g.axes.length >= 6);
     this.pad = pad ? pad.id : null;
-    if (!pad) return;
-    const a = pad.axes.map((v) => (Math.abs(v) < 0.08 ? 0 : v));
-    const { forward, up, right } = this.cameraAxes();
-    const move = right.multiplyScalar(a[0]).add(up.multiplyScalar(-a[1])).add(forward.multiplyScalar(-a[2]));
-    if (move.lengthSq() > 0) this.moveBy(move.multiplyScalar(0.4 * dt));
-    const { forward: f, up: u, right: r } = this.cameraAxes();
-    if (a[3]) this.turn(r, a[3] * 90 * DEG * dt);
-    if (a[4]) this.turn(u, a[4] * 90 * DEG * dt);
-    if (a[5]) this.turn(f, a[5] * 90 * DEG * dt);
+    if (!pad || this.ui.stopped) return;
+    const a = pad.axes.map((v) => (Math.abs(v) < PAD_DEAD ? 0 : v));
+    const axes = () => {
+      const { forward, up, right } = this.cameraAxes();
+      return [right, up, forward.negate()].map((v, i) => v.multiplyScalar(PAD_SIGNS[i]));
+    };
+    const move = new THREE.Vector3();
+    axes().forEach((v, i) => move.addScaledVector(v, a[i]));
+    if (move.lengthSq() > 0) this.moveBy(move.multiplyScalar(PAD_SPEED * dt));
+    axes().forEach((v, i) => a[3 + i] && this.turn(v, a[3 + i] * PAD_TURN * dt));
     const pressed = pad.buttons.map((b) => b.pressed);
     if (pressed[0] && !this.padWas?.[0]) this.toggleHold();
     if (pressed[1] && !this.padWas?.[1]) this.takeKey();

@@ -11,6 +11,7 @@ export class Link {
     this.samples = [];
     this.connected = false;
     this.stopped = false;
+    this.rtt = null; // ms, the last ping's round trip
     const token = new URLSearchParams(location.search).get('token') || '';
     const scheme = location.protocol === 'https:' ? 'wss' : 'ws';
     this.url = `${scheme}://${location.host}/ws?token=${encodeURIComponent(token)}`;
@@ -20,10 +21,16 @@ export class Link {
 
   open() {
     const ws = new WebSocket(this.url);
-    ws.onopen = () => { this.connected = true; this.onState(true); };
+    ws.onopen = () => {
+      this.connected = true;
+      this.sent.clear(); // a new connection acks from scratch
+      this.acked = 0;
+      this.onState(true);
+    };
     ws.onmessage = (e) => {
       const msg = JSON.parse(e.data);
       if (msg.type === 'frame' && msg.ack > this.acked) this.acked = msg.ack;
+      if (msg.type === 'pong' && typeof msg.t === 'number') this.rtt = performance.now() - msg.t;
       if (msg.type === 'stopped') this.stopped = true;
       this.onMessage(msg);
     };
@@ -58,6 +65,12 @@ export class Link {
       if (this.samples.length > 200) this.samples.shift();
     }
     for (const seq of [...this.sent.keys()]) if (seq <= this.acked) this.sent.delete(seq);
+  }
+
+  // The median of the last n latency samples (the HUD's figure), or null.
+  median(n = 50) {
+    const s = this.samples.slice(-n).sort((a, b) => a - b);
+    return s.length ? s[Math.floor(s.length / 2)] : null;
   }
 
   latency() {

@@ -14,23 +14,26 @@ const puppet = {
 };
 window.puppet = puppet;
 window.addEventListener('error', (e) => puppet.errors.push(String(e.message)));
+window.addEventListener('unhandledrejection', (e) => puppet.errors.push(String(e.reason)));
 
 let view = null, hud = null, input = null, frame = null, fresh = false, last = performance.now();
+let shapesOf = ''; // the rig the view was built for: a server with another rig reloads the page
 
 function onMessage(msg) {
-  if (msg.type === 'hello') {
-    if (!view) start(msg);
-    frame = msg.frame; fresh = true;
-    hud.keys(msg.keys); puppet.keys = msg.keys;
-  } else if (msg.type === 'frame') {
-    frame = msg; fresh = true;
-  } else if (msg.type === 'keys') {
-    hud.keys(msg.keys); puppet.keys = msg.keys;
-  } else if (msg.type === 'notice') {
-    hud.notice(msg.level, msg.text); puppet.notices.push(msg.text);
-  } else if (msg.type === 'stopped') {
-    hud.end(msg); puppet.stopped = msg;
-  }
+  if (msg.type === 'hello') hello(msg);
+  else if (msg.type === 'frame') { frame = msg; fresh = true; }
+  else if (msg.type === 'keys') { hud.keys(msg.keys); puppet.keys = msg.keys; }
+  else if (msg.type === 'notice') { hud.notice(msg.level, msg.text); puppet.notices.push(msg.text); }
+  else if (msg.type === 'stopped') { hud.end(msg); input.release(false); puppet.stopped = msg; }
+}
+
+function hello(msg) {
+  const rig = JSON.stringify([msg.rig, msg.bodies, msg.shapes]);
+  if (view && rig !== shapesOf) { location.reload(); return; }
+  if (!view) { shapesOf = rig; start(msg); }
+  input.reset(); // a new connection: nothing gripped, nothing waiting for an ack
+  frame = msg.frame; fresh = true;
+  hud.keys(msg.keys, false); puppet.keys = msg.keys;
 }
 
 function start(hello) {
@@ -38,6 +41,7 @@ function start(hello) {
   hud = new Hud(hello, link);
   input = new Input(view, link, hud);
   hud.onKey = () => input.takeKey();
+  hud.onRelease = () => input.release();
   requestAnimationFrame(draw);
 }
 
@@ -48,7 +52,7 @@ function draw(now) {
   last = now;
   input.flush();
   if (!frame) return;
-  if (!fresh && !view.moved()) return; // nothing new to draw
+  if (!fresh && !view.moved() && !hud.wanted.length) return; // nothing new to draw
   if (fresh) {
     input.adopt(frame);
     view.update(frame);
@@ -65,4 +69,12 @@ function draw(now) {
   }
 }
 
-const link = new Link(onMessage, (up) => { puppet.connected = up; });
+function onState(up) {
+  puppet.connected = up;
+  const conn = document.getElementById('conn');
+  conn.hidden = up || link.stopped;
+  conn.textContent = 'Disconnected: the server may have stopped. Retrying every 2 s…';
+  if (hud) hud.connection(up);
+}
+
+const link = new Link(onMessage, onState);

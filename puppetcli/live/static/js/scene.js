@@ -12,6 +12,23 @@ function geometryOf(shape) {
   return new THREE.BoxGeometry(2 * shape.half[0], 2 * shape.half[1], 2 * shape.half[2]);
 }
 
+// A soft round "contact shadow": a radial gradient on a disc just above the ground, under the
+// root body (no shadow maps).
+function softShadow() {
+  const c = document.createElement('canvas');
+  c.width = c.height = 64;
+  const g = c.getContext('2d');
+  const grad = g.createRadialGradient(32, 32, 0, 32, 32, 32);
+  grad.addColorStop(0, 'rgba(0,0,0,0.22)');
+  grad.addColorStop(1, 'rgba(0,0,0,0)');
+  g.fillStyle = grad;
+  g.fillRect(0, 0, 64, 64);
+  const disc = new THREE.Mesh(new THREE.PlaneGeometry(0.7, 0.7),
+    new THREE.MeshBasicMaterial({ map: new THREE.CanvasTexture(c), transparent: true, depthWrite: false }));
+  disc.rotation.x = -Math.PI / 2;
+  return disc;
+}
+
 export class View {
   constructor(container, hello) {
     this.hello = hello;
@@ -63,14 +80,16 @@ export class View {
       prop: new THREE.MeshLambertMaterial({ color: colors.prop }),
     };
     this.boneShape = {};
+    const boneOfBody = new Map(hello.bones.map((b) => [b.body, b.name]));
     for (const shape of hello.shapes) {
       const mesh = new THREE.Mesh(geometryOf(shape), material[shape.role] || material.prop);
       mesh.position.copy(v3(shape.pos));
       mesh.quaternion.copy(q4(shape.quat));
-      if (shape.bone) {
-        mesh.userData.bone = shape.bone;
+      const bone = shape.role === 'bone' ? shape.bone || boneOfBody.get(shape.body) : null;
+      if (bone) {
+        mesh.userData.bone = bone;
         this.pickable.push(mesh);
-        if (!(shape.bone in this.boneShape)) this.boneShape[shape.bone] = mesh;
+        if (!(bone in this.boneShape)) this.boneShape[bone] = mesh;
       }
       (shape.body >= 0 ? this.bodies[shape.body] : this.scene).add(mesh);
     }
@@ -95,6 +114,9 @@ export class View {
     const grid = new THREE.GridHelper(8, 32, hello.colors.grid, hello.colors.grid);
     grid.position.set(hello.camera.target[0], y + 0.001, hello.camera.target[2]);
     this.scene.add(grid);
+    this.shadow = softShadow();
+    this.shadow.position.y = y + 0.002;
+    this.scene.add(this.shadow);
   }
 
   addPointer(hello) {
@@ -121,6 +143,7 @@ export class View {
       this.bodies[i].position.set(p[3 * i], p[3 * i + 1], p[3 * i + 2]);
       this.bodies[i].quaternion.set(q[4 * i + 1], q[4 * i + 2], q[4 * i + 3], q[4 * i]);
     }
+    if (this.shadow && this.bodies.length) this.shadow.position.set(p[0], this.shadow.position.y, p[2]);
     this.pointer.position.copy(v3(frame.pointer.pos));
     this.pointer.quaternion.copy(q4(frame.pointer.quat));
     this.pointer.material.opacity = frame.touch ? 1.0 : 0.6;
