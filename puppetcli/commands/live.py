@@ -19,7 +19,7 @@ import numpy as np
 from puppetcli.keyoutputs import KEY_OUTPUTS, write_key_outputs
 from puppetcli.live.recording import POINTER_RADIUS, LiveRecording
 from puppetcli.live.scene import scene_bounds, scene_description
-from puppetcli.live.server import FRAME_HZ, LiveServer, Outcome
+from puppetcli.live.server import FRAME_HZ, LOOPBACK, LiveServer, Outcome
 from puppetcli.outputs import OutputError, prepare_outdir
 from puppetcli.record import FIT_FRACTION, device_reach, fit_workspace
 from puppetcli.render_camera import parse_view
@@ -197,7 +197,7 @@ def _pointer_start(lo, hi, centre, radius: float) -> np.ndarray:
 
 
 def _ready(url: str, host: str, no_open: bool) -> None:
-    if host not in ("127.0.0.1", "localhost", "::1"):
+    if host not in LOOPBACK:
         click.echo(f"warning: listening on {host}: other machines can reach this page "
                    "(the token in the URL is its only lock)", err=True)  # fmt: skip
     click.echo(f"puppetcli live: {url}")

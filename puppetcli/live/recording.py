@@ -126,7 +126,6 @@ class LiveRecording:
         self.to_action = EventActions(session, self.model)
         self.queue: deque = deque()
         self.position_only, self.touch = True, False
-        self.key_count = 0
         self._pending_grip: dict | None = None
         self._button(0.0, {"button": "touch", "state": "up"})  # live touching starts off
 
@@ -198,8 +197,7 @@ class LiveRecording:
             self.touch = c.on
             self._button(t, {"button": "touch", "state": "down" if c.on else "up"})
         elif isinstance(c, Key):
-            self.key_count += 1
-            label = c.label or f"key {self.key_count}"
+            label = c.label or f"key {self.to_action.keys + 1}"  # as a replay names it
             self._button(t, {"button": "key", "state": "down", "label": label})
             self._button(t, {"button": "key", "state": "up"})
         elif isinstance(c, Undo) and len(self.runner.keys):

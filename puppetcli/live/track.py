@@ -91,7 +91,7 @@ class PointerFilter:
         """One tick towards the target."""
         a = self.alpha
         self.pos = tuple(p + a * (g - p) for p, g in zip(self.pos, target_pos, strict=True))
-        self.quat = _slerp(self.quat, tuple(map(float, target_quat)), a)
+        self.quat = _slerp(self.quat, target_quat, a)
 
     def jump(self, pos, q) -> None:
         """Be at ``pos``, ``q`` now."""
