@@ -2,16 +2,16 @@
 
 Speed is reported as ratios measured in the same run, never as an absolute pass/fail:
 against the paper's setting on the numpy step (PGS, 15 iterations, warm start; the
-readable reference implementation, ``solver.step.step``) and, with ``--peers``, against
+readable reference implementation, ``solver.pipeline.step``) and, with ``--peers``, against
 MuJoCo on the same rig and scene (``puppetcli.peers.doll_timer``).  Every solver runs
-on the compiled step (``solver.fast.fast_step``, what the CLI uses); the numpy step is
+on the compiled step (``solver.compiled.fast.fast_step``, what the CLI uses); the numpy step is
 measured only for the baseline unless asked, since it is ~40× slower and its other
 solvers say nothing about the CLI.
 
 Engines: ``fast`` is ``fast_step`` (a new State every step, as the numpy step and
-the CLI's script runner); ``sim`` is ``solver.fast.sim.Sim``, the same kernel stepping
+the CLI's script runner); ``sim`` is ``solver.compiled.sim.Sim``, the same kernel stepping
 its own arrays in place (as MuJoCo's mj_step steps mjData: the loop for driving a
-device); ``numpy`` is ``solver.step.step``.
+device); ``numpy`` is ``solver.pipeline.step``.
 
 The scene (``run_timer``): the doll standing on its stand, its left forearm's end
 gripped (position only, ``GRIP``) and lifted by ``LIFT`` along a minimum-jerk path over
@@ -39,13 +39,13 @@ import numpy as np
 from puppetcli.pointer import Motion, pointer_over_step, still
 from puppetcli.rigfile import load_rig
 from solver import quat
+from solver.compiled.fast import fast_step
+from solver.compiled.sim import Sim
 from solver.errors import SimulationError
-from solver.fast import fast_step
-from solver.fast.sim import Sim
-from solver.grip import make_coupling
 from solver.model import Model, build_model
+from solver.pipeline import step
+from solver.rows.grip import make_coupling
 from solver.state import StepInput, StepReport, initial_state
-from solver.step import step
 
 RIGS = Path(__file__).resolve().parent.parent / "rigs"
 WARMUP_STEPS = 5

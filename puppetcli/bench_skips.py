@@ -15,7 +15,7 @@ Skips (``solver.model.Options``):
 - ``direct``: ``auto`` solves a step whose rows are all two-sided exactly (the tree
   elimination) instead of iterating; off = the paper's PGS (15 sweeps), on the doll
   without ground and limits (``doll-joints``).  Off differs by PGS's own error;
-- ``sleep``: islands at rest and untouched are frozen (solver.sleep).  The doll first
+- ``sleep``: islands at rest and untouched are frozen (solver.advance.sleep).  The doll first
   settles for SETTLE seconds (untimed, with sleep on: every island falls asleep), then
   both runs start from that pose, the one without sleep with every island awake; the
   grip wakes the upper body, the legs sleep on.
@@ -31,7 +31,7 @@ import numpy as np
 
 from puppetcli.bench import doll_scenes, grip_inputs
 from solver import quat
-from solver.fast import fast_step
+from solver.compiled.fast import fast_step
 from solver.model import Model
 from solver.state import State, StepInput, initial_state
 

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from solver import quat, quat1
-from solver.grip import Pointer
+from solver.rows.grip import Pointer
 
 
 def min_jerk(tau: float) -> float:

@@ -8,7 +8,7 @@ on, ×0.7 (the reference implementation's factor); direct; auto; hybrid with 15 
 sweeps; each at h = 1, 5, 20 ms.  The baseline is the paper's setting ``pgs15-ws``.
 ``--peers`` adds MuJoCo's rows (``puppetcli.precision_peers``).
 
-Every run uses the compiled step in place (solver.fast.sim.Sim: fast_step's kernel and
+Every run uses the compiled step in place (solver.compiled.sim.Sim: fast_step's kernel and
 states, bit for bit, without its per-step Python; ``precision_scenes.run_scene``).
 Time is the wall time of the steps (time.perf_counter; reading a sample's state is not
 timed, as in the MuJoCo rows), the best of several runs after an untimed warm-up run

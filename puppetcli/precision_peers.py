@@ -24,8 +24,8 @@ from puppetcli import peers
 from puppetcli.bench import LIFT, repeats_for
 from puppetcli.precision import PrecisionRow
 from puppetcli.precision_scenes import CHAIN_TIMES, DOLL_LIFT, DOLL_TIMES, doll_model
+from solver.compiled.fast import fast_step
 from solver.errors import SimulationError
-from solver.fast import fast_step
 from solver.observe import bone_tails, joint_gaps
 from solver.state import initial_state
 

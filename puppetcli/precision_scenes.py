@@ -35,7 +35,7 @@ import scipy.linalg
 
 from puppetcli.bench import grip_inputs
 from puppetcli.rigfile import load_rig
-from solver.fast.sim import Sim
+from solver.compiled.sim import Sim
 from solver.model import Model, build_model
 from solver.observe import bone_heads, bone_tails, joint_rotations
 from solver.state import State, StepInput
@@ -162,7 +162,7 @@ def scene(kind: str, model: Model) -> Scene:
 def run_scene(sc: Scene) -> tuple[list[np.ndarray], list[float], float]:
     """(samples at the marks, wall seconds of the steps up to each mark, mean substeps).
 
-    The steps run in place (solver.fast.sim.Sim: the same kernel and states as
+    The steps run in place (solver.compiled.sim.Sim: the same kernel and states as
     fast_step, bit for bit, without a new State object a step), so a time is the
     simulation's, as the MuJoCo rows' are mj_step's (puppetcli.peers): fast_step's own
     Python (~20 µs a step) would add the same to every setting and hide their

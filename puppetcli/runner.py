@@ -3,8 +3,8 @@
 Actions run one after another on one timeline.  A timed action (push, wait, move,
 touch, rotate, twist) ends at its start time plus its duration; the simulation
 steps while t < t_end − h/2, so durations that are not multiples of h do not
-accumulate rounding.  Steps run on the compiled step (solver.fast.fast_step,
-identical to solver.step.step to rounding, which it falls back to for anything it
+accumulate rounding.  Steps run on the compiled step (solver.compiled.fast.fast_step,
+identical to solver.pipeline.step to rounding, which it falls back to for anything it
 does not handle).  The pointer keeps its last pose between motions, and a
 grip holds through waits and pushes until `release`.  A key captures the state
 when it is reached.  If the simulation fails, the keys and expectation results
@@ -34,9 +34,11 @@ from puppetcli.script import Key, Push, Script, Wait
 from puppetcli.script_actions import Expect, Grip, Move, Release, Rotate, Touch, Twist
 from puppetcli.snapshot import capture, push_input
 from solver import quat
+from solver.compiled.fast import fast_step
 from solver.errors import SimulationError
-from solver.fast import fast_step
-from solver.grip import (
+from solver.model import Model
+from solver.observe import bone_points
+from solver.rows.grip import (
     Coupling,
     Pointer,
     bone_reach,
@@ -44,8 +46,6 @@ from solver.grip import (
     nearest_point,
     segment_distances,
 )
-from solver.model import Model
-from solver.observe import bone_points
 from solver.state import State, StepInput, StepReport, initial_state
 
 POINTER_ACTIONS = (Grip, Move, Rotate, Twist, Release, Touch)

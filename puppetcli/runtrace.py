@@ -20,9 +20,9 @@ from puppetcli.pointer import device_from_world
 from puppetcli.script import Script
 from puppetcli.trace import TraceWriter, line_scene, load_schema
 from solver import quat
-from solver.grip import Coupling
 from solver.model import Model
 from solver.observe import bone_heads, bone_tails, joint_rotations
+from solver.rows.grip import Coupling
 from solver.state import State, StepInput, StepReport
 
 POINTER_COLOR = {"r": 1.0, "g": 0.3, "b": 0.2, "a": 1.0}

@@ -10,7 +10,7 @@ rig at an extreme setting), a start state, an input, and the bounds it must keep
   work (E and its bound: solver.stress_cases);
 * the worst joint separation (solver.observe.joint_gaps), bounded by
   Options.max_joint_gap;
-* the worst penetration (deepest solver.collide.collide depth) from the scene's
+* the worst penetration (deepest solver.collide.scene.collide depth) from the scene's
   ``penetration_from`` on;
 * for scenes without external loads, the drift of linear and angular momentum.
 
@@ -29,9 +29,9 @@ import numpy as np
 
 from puppetcli.rigfile import load_rig
 from solver import stress_cases as sc
-from solver.collide import collide
+from solver.collide.scene import collide
+from solver.compiled.fast import fast_step as step
 from solver.errors import SimulationError
-from solver.fast import fast_step as step
 from solver.model import build_model
 from solver.observe import joint_gaps, momentum
 from solver.spec import ShapeSpec

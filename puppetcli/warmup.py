@@ -41,7 +41,7 @@ def warm_up(prepare: Callable[[], object]) -> None:
 
 def warm_up_step(model) -> None:
     """``warm_up`` with one throwaway compiled step of ``model`` from rest."""
-    from solver.fast import fast_step
+    from solver.compiled.fast import fast_step
     from solver.state import StepInput, initial_state
 
     warm_up(lambda: fast_step(model, initial_state(model), StepInput()))

@@ -21,7 +21,8 @@ from typing import TypeVar
 
 import numpy as np
 
-from solver import collide, quat
+from solver import quat
+from solver.collide import scene as collide
 from solver.massprops import shape_frame, shape_inertia_local, world_inertia
 from solver.spec import RigSpec, ShapeSpec
 
@@ -53,14 +54,14 @@ class Options:
     max_speed (m/s), max_angular_speed (rad/s), max_joint_gap (m): beyond these
         the simulation is declared numerically broken.
     max_substeps: most equal substeps a step may take when its joints' geometric
-        stiffness needs them (solver.substep); 1 = never subdivide.
+        stiffness needs them (solver.advance.substep); 1 = never subdivide.
     Skips of work a scene does not need (each measured by ``puppetcli bench --skips``
     and tested to change nothing): cull_pairs: shape pairs whose bounding spheres are
     farther apart than contact_margin get no narrow phase; dormant_rows: the hybrid
     solve checks one-sided rows that neither pushed last step nor ask to push after the
-    solve instead of iterating them (solver.hybrid); sleep: islands at rest and
+    solve instead of iterating them (solver.solve.hybrid); sleep: islands at rest and
     untouched for sleep_time (s), every body slower than sleep_speed (m/s) and
-    sleep_spin (rad/s), are frozen until touched (solver.sleep).
+    sleep_spin (rad/s), are frozen until touched (solver.advance.sleep).
     """
 
     h: float = 0.005

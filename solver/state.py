@@ -27,7 +27,7 @@ class State:
     joint_torque_avg (nj,) N·m: low-passed norm of the rheology torque (yield test).
     joint_torque (nj,3) N·m: rheology row forces λ_s of the last step.
     warm_key (n,) int64 sorted, warm_lam (n,): row forces of the last step by row key.
-    body_asleep (nb,) bool: the body's island sleeps (solver.sleep); body_still (nb,) s:
+    body_asleep (nb,) bool: the body's island sleeps (solver.advance.sleep); body_still (nb,) s:
         how long its island has been at rest.  Empty arrays mean all awake.
     """
 
@@ -54,8 +54,8 @@ class StepInput:
 
     body_force (nb,3) N and body_torque (nb,3) N·m, world frame, about each
     body's centre of mass.  ``None`` = no external load.
-    pointer: the haptic pointer (solver.grip.Pointer) or None; coupling: the grip
-    (solver.grip.Coupling) or None.  Without a coupling, a pointer with a radius
+    pointer: the haptic pointer (solver.rows.grip.Pointer) or None; coupling: the grip
+    (solver.rows.grip.Coupling) or None.  Without a coupling, a pointer with a radius
     touches the bones (free mode).
     """
 
@@ -72,7 +72,7 @@ class StepReport:
     grip_force (3,) N, grip_torque (3,) N·m: the coupling's wrench on the gripped
     bone (torque about the grip point); touch_force (3,) N: the pointer's contact
     force on the bones in free mode.  The user's hand feels their opposite.
-    substeps: how many equal substeps the step took (solver.substep); with more than
+    substeps: how many equal substeps the step took (solver.advance.substep); with more than
     one, rows and contacts are the last substep's, iterations their sum, the residual
     their worst and the wrenches their mean.
     """

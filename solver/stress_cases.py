@@ -3,7 +3,7 @@
 A ``Scene`` is simulated for ``duration`` seconds by ``puppetcli.stress``.  Its
 input (``Drive``) is pushes (a force and torque on a body over a time window)
 and optionally a grip: a pointer following a piecewise-linear path, coupled to a
-bone by ``solver.grip.make_coupling`` at t = 0.  After the last step in which the
+bone by ``solver.rows.grip.make_coupling`` at t = 0.  After the last step in which the
 input is ``active`` nothing does work on the scene (the pushes are over, the
 pointer is still), so its total energy
 
@@ -21,10 +21,10 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from solver import quat
-from solver.grip import Coupling, Pointer, make_coupling
 from solver.massprops import shape_volume
 from solver.model import Model, build_model
 from solver.observe import kinetic_energy, potential_energy
+from solver.rows.grip import Coupling, Pointer, make_coupling
 from solver.spec import (
     BoneSpec,
     GroundSpec,

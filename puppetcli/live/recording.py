@@ -37,9 +37,9 @@ from puppetcli.script_actions import GRIP_DEFAULTS
 from puppetcli.session import TICK, Event, Session, SessionWriter, Workspace
 from puppetcli.spidar import DevicePreset, TensionDistributor
 from solver import quat
-from solver.fast import fast_step
-from solver.grip import nearest_point
+from solver.compiled.fast import fast_step
 from solver.model import Model, build_model
+from solver.rows.grip import nearest_point
 from solver.spec import RigSpec
 from solver.state import StepInput, StepReport, initial_state
 

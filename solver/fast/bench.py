@@ -17,19 +17,19 @@ from dataclasses import dataclass
 import numpy as np
 
 from solver import quat
-from solver.fast import fast_step
-from solver.fast.clock import counter_read_seconds, seconds_per_cycle
-from solver.fast.kernel import STAGES
-from solver.fast.pack import fast_model
-from solver.fast.rows import row_arrays
-from solver.fast.tree import dense_solve, node_rows, tree_solve
-from solver.grip import Pointer, make_coupling
-from solver.integrate import free_velocity
+from solver.advance.integrate import free_velocity
+from solver.compiled.clock import STAGES, counter_read_seconds, seconds_per_cycle
+from solver.compiled.fast import fast_step
+from solver.compiled.pack import fast_model
 from solver.model import Model
 from solver.observe import bone_points
-from solver.response import regularize, row_response, world_inverse_inertia
+from solver.pipeline import step
+from solver.rows.build import build_rows
+from solver.rows.grip import Pointer, make_coupling
+from solver.rows.table_kernel import row_arrays
+from solver.solve.direct_kernel import dense_solve, node_rows, tree_solve
+from solver.solve.response import regularize, row_response, world_inverse_inertia
 from solver.state import State, StepInput, initial_state
-from solver.step import build_rows, step
 
 PUSH_BONE, PUSH_FORCE, PUSH_POINT, PUSH_TIME = "forearm_l", (0.0, 60.0, 0.0), (0.25, 0, 0), 0.3
 GRIP_BONE, LIFT, LIFT_TIME = "hand_r", (0.0, 0.2, 0.1), 0.5
@@ -93,7 +93,7 @@ def _run(fn, model: Model, state: State, inputs: list[StepInput]) -> tuple[float
 
 
 def compare(model: Model, seconds: float = 0.5, repeats: int = 3) -> Timing:
-    """Best-of-``repeats`` steps/s of solver.step.step and fast_step over ``seconds``."""
+    """Best-of-``repeats`` steps/s of solver.pipeline.step and fast_step over ``seconds``."""
     n = max(1, round(seconds / model.options.h))
     state, inputs = scene_inputs(model, n)
     slow = min(_run(step, model, state, inputs)[0] for _ in range(repeats))
@@ -174,7 +174,7 @@ def direct_solvers(model: Model, calls: int = 2000) -> dict[str, float]:
 def stage_profile(
     model: Model, state: State, inputs: list[StepInput], repeats: int = 3
 ) -> dict[str, float]:
-    """Microseconds per step of each stage of the compiled step (solver.fast.kernel.STAGES,
+    """Microseconds per step of each stage of the compiled step (solver.compiled.clock.STAGES,
     read from the processor's cycle counter inside the step) over ``inputs``, plus the
     rest of an unprofiled step's wall time: argument passing and fast_step's own Python
     (and the substeps of a subdivided step, which run on their own model).

@@ -120,7 +120,7 @@ def test_skips_command_prints_each_skip_with_its_ratio():
 
 def test_doll_stages_cover_the_step():
     stages = bench.doll_stages(0.005, 0.05)
-    from solver.fast.kernel import STAGES
+    from solver.compiled.clock import STAGES
 
     assert list(stages)[: len(STAGES)] == list(STAGES)
     assert all(v >= 0.0 for k, v in stages.items() if k in STAGES)

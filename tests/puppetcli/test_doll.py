@@ -12,8 +12,8 @@ from puppetcli.rigfile import load_rig, rig_from_text
 from solver import quat
 from solver.model import build_model
 from solver.observe import joint_rotations
+from solver.pipeline import step
 from solver.state import initial_state
-from solver.step import step
 
 DOLL = Path(__file__).resolve().parents[2] / "rigs" / "doll.yaml"
 ARM = ("upper_arm_l", "forearm_l", "hand_l")

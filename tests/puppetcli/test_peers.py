@@ -17,9 +17,9 @@ from puppetcli.rigfile import load_rig
 from solver import quat
 from solver.model import build_model
 from solver.observe import bone_tails
+from solver.pipeline import step
 from solver.spec import BoneSpec, GroundSpec, RheologySpec, RigSpec, ShapeSpec
 from solver.state import initial_state
-from solver.step import step
 
 try:
     import mujoco

@@ -14,8 +14,8 @@ import pytest
 from scipy.spatial import ConvexHull, cKDTree
 from scipy.spatial.transform import Rotation
 
-from solver.collide import Contacts, Geometry, candidate_pairs, collide
-from solver.collide_segment import segment_params
+from solver.collide.scene import Contacts, Geometry, candidate_pairs, collide
+from solver.collide.segment import segment_params
 
 Q0 = (1.0, 0.0, 0.0, 0.0)
 S2 = np.sqrt(2.0)
@@ -863,7 +863,7 @@ def test_friction_is_the_geometric_mean():
 def test_box_pairs_in_one_batch_match_one_at_a_time(k):
     # Regression: the separating-axis test broadcast (k,3) against (k,15,3), which
     # raised for most k and was silently wrong for k = 15.
-    from solver.collide_boxbox import separating_axis
+    from solver.collide.boxbox import separating_axis
 
     rng = np.random.default_rng(k)
     ca, cb = rng.normal(size=(k, 3)), rng.normal(size=(k, 3))

@@ -8,7 +8,7 @@ from dataclasses import replace
 import numpy as np
 from rigbuild import chain
 
-from solver.fast import fast_step
+from solver.compiled.fast import fast_step
 from solver.model import build_model
 from solver.observe import joint_gaps, kinetic_energy, momentum, potential_energy
 from solver.state import initial_state

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from solver.model import build_model
+from solver.pipeline import step
 from solver.spec import BoneSpec, GroundSpec, RigSpec, ShapeSpec, SolverSpec
 from solver.state import initial_state
-from solver.step import step
 
 G = 9.81
 

@@ -1,4 +1,4 @@
-"""The compiled step (solver.fast) against the numpy step, an independent implementation.
+"""The compiled step (solver.compiled.fast) against the numpy step, an independent implementation.
 
 Both run side by side from the same state with the same inputs; every step's state
 must agree to 1e-9 and every step's report must match.  Row forces (λ, joint torques,
@@ -17,20 +17,21 @@ import numpy as np
 import pytest
 from paper_experiment import DD, DF, INERTIA, KF, T_END, T_LOAD, TAU, recursion
 from rigbuild import chain, one_bone, rheology
+from solver.fast.bench import scene_inputs
 
 from puppetcli.rigfile import load_rig
-from solver import hybrid, quat
+from solver import quat
+from solver.advance.stabilize import project_joints
+from solver.compiled.fast import fast_step, supports
 from solver.errors import SimulationError
-from solver.fast import fast_step, supports
-from solver.fast.bench import scene_inputs
-from solver.fast.hybrid import NU_CAP
-from solver.grip import Pointer, make_coupling
 from solver.model import build_model
 from solver.observe import bone_points, joint_gaps, joint_rotations
+from solver.pipeline import step
+from solver.rows.grip import Pointer, make_coupling
+from solver.solve import hybrid
+from solver.solve.hybrid_kernel import NU_CAP
 from solver.spec import BoneSpec, GroundSpec, RigSpec, ShapeSpec
-from solver.stabilize import project_joints
 from solver.state import StepInput, initial_state
-from solver.step import step
 
 DOLL = Path(__file__).resolve().parents[2] / "rigs" / "doll.yaml"
 TOL, FORCE_TOL = 1e-9, 1e-8
@@ -153,7 +154,7 @@ def test_tumbling_chain_with_joint_projection_matches(monkeypatch):
         projected.append(joint_gaps(model, pos, q).max() > 1e-4)
         return project_joints(model, pos, q, *args, **kwargs)
 
-    monkeypatch.setattr("solver.step.project_joints", counting)
+    monkeypatch.setattr("solver.pipeline.project_joints", counting)
     spec = chain(4, 0.01, root_mode="free", gravity=(0, 0, 0), lengths=[0.3, 0.1, 0.4, 0.2])
     model = build_model(spec)
     omega = np.random.default_rng(0).normal(scale=3.0, size=(4, 3))
@@ -198,7 +199,7 @@ def lying_chain(links: int = 30, iterations: int = 100):
 
 def test_more_iterated_rows_than_the_scratch_holds_matches(monkeypatch):
     # 30 contacts: 90 rows in the hybrid's Schur complement, more than the step's scratch
-    # holds (solver.fast.hybrid.NU_CAP), so the compiled solve makes a matrix of its own.
+    # holds (solver.solve.hybrid_kernel.NU_CAP), so the compiled solve makes a matrix of its own.
     # 100 sweeps converge, so the two implementations agree to rounding.
     sizes = []  # rows the numpy hybrid iterates, step by step
     dense_pgs = hybrid.dense_pgs

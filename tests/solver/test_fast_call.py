@@ -1,4 +1,4 @@
-"""The Python around the compiled step (solver.fast.fast_step): the States and reports it
+"""The Python around the compiled step (solver.compiled.fast.fast_step): the States and reports it
 builds cheaply are the ones the ordinary constructors build."""
 
 from __future__ import annotations
@@ -7,8 +7,8 @@ import dataclasses
 
 import numpy as np
 
-import solver.fast as fast
-from solver.fast import FIELDS, SOLVER_NAMES, _successor, kernel_report
+import solver.compiled.fast as fast
+from solver.compiled.fast import FIELDS, SOLVER_NAMES, _successor, kernel_report
 from solver.state import State, StepReport
 
 

@@ -11,21 +11,27 @@ import pytest
 import scipy.linalg
 from rigbuild import chain, rheology
 
-from solver import collide, collide_box, collide_segment, quat
-from solver.fast.contacts import collide_pointer, collide_scene, world_shapes
-from solver.fast.flat import unflatten
-from solver.fast.narrow import segment_box, segment_segment
-from solver.fast.pack import fast_model, pack
-from solver.fast.rows import LIMIT_SLACK, limit_arrays, limit_rows, row_arrays
-from solver.fast.tree import dense_solve, node_rows, tree_solve
-from solver.joints import joint_frames
-from solver.joints import limit_rows as numpy_limit_rows
+from solver import quat
+from solver.collide import box as collide_box
+from solver.collide import scene as collide
+from solver.collide import segment as collide_segment
+from solver.collide.box_kernel import segment_box
+from solver.collide.pointer import pointer_contacts
+from solver.collide.pointer_kernel import collide_pointer
+from solver.collide.scene_kernel import collide_scene, world_shapes
+from solver.collide.segment_kernel import segment_segment
+from solver.compiled.flat import unflatten
+from solver.compiled.pack import fast_model, pack
 from solver.model import build_model
-from solver.response import dense_system, regularize, row_response, world_inverse_inertia
+from solver.rows.build import build_rows
+from solver.rows.joints import joint_frames
+from solver.rows.joints import limit_rows as numpy_limit_rows
+from solver.rows.joints_kernel import LIMIT_SLACK, limit_arrays, limit_rows
+from solver.rows.table_kernel import row_arrays
+from solver.solve.direct_kernel import dense_solve, node_rows, tree_solve
+from solver.solve.response import dense_system, regularize, row_response, world_inverse_inertia
 from solver.spec import BoneSpec, GroundSpec, LimitSpec, PropSpec, RigSpec, ShapeSpec
 from solver.state import initial_state
-from solver.step import build_rows
-from solver.touch import pointer_contacts
 
 CAPSULE = ShapeSpec("capsule", radius=0.04)
 SPHERE = ShapeSpec("sphere", radius=0.05)
@@ -128,7 +134,7 @@ def test_narrow_early_outs_keep_every_contact(seed):
     """segment_segment and segment_box leave a pair early when its closest points (the
     box: a Lipschitz bound) are beyond the margin; on pairs placed so their distance
     straddles the margin — near-parallel segments, spheres, segments up to 10 m long —
-    they keep exactly numpy's contacts (solver.collide_segment / collide_box)."""
+    they keep exactly numpy's contacts (solver.collide.segment / collide_box)."""
     rng = np.random.default_rng(seed)
     margin, k = 0.01, 400
     da, db = _unit_rows(rng, k), _unit_rows(rng, k)
@@ -259,9 +265,9 @@ def test_tree_and_dense_solves_equal_scipy_on_a_joint_table(root_mode):
 
 
 def test_qexp_series_equals_the_exact_exponential():
-    """kin.qexp's Taylor branch (θ/2 < EXP_SERIES) and its sin/cos branch against numpy's
+    """kin_kernel.qexp's Taylor branch (θ/2 < EXP_SERIES) and its sin/cos branch against numpy's
     quat.exp (sin and cos for every angle), across and at the switch."""
-    from solver.fast.kin import EXP_SERIES, qexp
+    from solver.kin_kernel import EXP_SERIES, qexp
 
     rng = np.random.default_rng(5)
     axes = _unit_rows(rng, 3000)
@@ -276,9 +282,9 @@ def test_qexp_series_equals_the_exact_exponential():
 
 
 def test_qlog_series_equals_the_exact_logarithm():
-    """kin.qlog's series branch (tan(θ/4) < 0.03) and its atan2 branch against numpy's
+    """kin_kernel.qlog's series branch (tan(θ/4) < 0.03) and its atan2 branch against numpy's
     quat.log (arctan2 for every angle), across and at the switch, both hemispheres."""
-    from solver.fast.kin import LOG_SERIES, qlog
+    from solver.kin_kernel import LOG_SERIES, qlog
 
     rng = np.random.default_rng(6)
     axes = _unit_rows(rng, 3000)

@@ -1,6 +1,6 @@
 """The compiled step frees every array it makes, and nothing twice.
 
-Most of the step runs without numba's reference counting (solver.fast.kernel._step,
+Most of the step runs without numba's reference counting (solver.compiled.kernel._step,
 ``_nrt=False``), between functions that keep it (the allocation of the step's arrays,
 the projection, the substep test, sleeping, a Schur complement too large for the
 step's scratch): an array handed the wrong way
@@ -24,8 +24,8 @@ from rigbuild import chain
 from test_fast import box_chain, doll_inputs, lying_chain
 
 from puppetcli.rigfile import load_rig
-from solver.fast import fast_step
-from solver.fast.sim import Sim
+from solver.compiled.fast import fast_step
+from solver.compiled.sim import Sim
 from solver.model import build_model
 from solver.state import initial_state
 

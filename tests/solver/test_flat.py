@@ -1,4 +1,4 @@
-"""solver.fast.flat: the packed model's arrays as views of a few buffers, rebuilt in
+"""solver.compiled.flat: the packed model's arrays as views of a few buffers, rebuilt in
 compiled code.  What the step sees must be exactly the arrays Python reads and writes
 (fm.ws, fm.iopt …): same memory, same shapes, shared where pack shares them."""
 
@@ -12,9 +12,8 @@ import pytest
 from rigbuild import chain
 
 from puppetcli.rigfile import load_rig
-from solver.fast.cache import HERE, PYTHON_ONLY
-from solver.fast.flat import NLEAF, SCHEMA, flatten, unflatten
-from solver.fast.pack import pack
+from solver.compiled.flat import NLEAF, SCHEMA, flatten, unflatten
+from solver.compiled.pack import pack
 from solver.model import build_model
 
 DOLL = Path(__file__).resolve().parents[2] / "rigs" / "doll.yaml"
@@ -64,11 +63,3 @@ def test_an_array_of_another_kind_is_refused():
         flatten(tuple(parts))
     assert len(SCHEMA) == len(PARTS)
 
-
-def test_python_only_modules_are_outside_the_compiled_step():
-    """cache.fingerprint skips them, so no kernel may be built from them."""
-    compiled = [p for p in HERE.glob("*.py") if p.name not in PYTHON_ONLY]
-    for name in PYTHON_ONLY:
-        assert "njit" not in (HERE / name).read_text()
-        module = "solver.fast" + ("" if name == "__init__.py" else "." + name[:-3])
-        assert not any(f"from {module} import" in p.read_text() for p in compiled)

@@ -1,4 +1,4 @@
-"""The hybrid solver (solver.hybrid): joints exact, bounded rows by PGS on their Schur
+"""The hybrid solver (solver.solve.hybrid): joints exact, bounded rows by PGS on their Schur
 complement; checked against the dense reference (BVLS), the dense LCP conditions, PGS
 on the same table, and the exact joint equations."""
 
@@ -12,16 +12,16 @@ from rigbuild import chain, rheology
 from test_solvers import contact_scene, lcp_violation, problem, run_pgs
 
 from solver import quat
-from solver.grip import Pointer, make_coupling
-from solver.hybrid import dormant_rows, equality_rows, hybrid_solve
 from solver.model import build_model
-from solver.pgs import dense_pgs
-from solver.reference import reference_solve
-from solver.response import dense_system
-from solver.rows import KIND_GRIP
+from solver.pipeline import step
+from solver.rows.grip import Pointer, make_coupling
+from solver.rows.table import KIND_GRIP
+from solver.solve.hybrid import dormant_rows, equality_rows, hybrid_solve
+from solver.solve.pgs import dense_pgs
+from solver.solve.reference import reference_solve
+from solver.solve.response import dense_system
 from solver.spec import ShapeSpec
 from solver.state import StepInput, initial_state
-from solver.step import step
 from solver.stress_cases import free_bodies
 
 

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from puppetcli.rigfile import load_rig
+from solver.advance.monitor import check_state
 from solver.errors import SimulationError
 from solver.model import build_model
-from solver.monitor import check_state
 from solver.state import initial_state
 
 DOLL = Path(__file__).resolve().parents[2] / "rigs" / "doll.yaml"

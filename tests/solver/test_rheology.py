@@ -10,8 +10,8 @@ from rigbuild import one_bone
 
 from solver.model import build_model
 from solver.observe import joint_rotations
+from solver.pipeline import step
 from solver.state import StepInput, initial_state
-from solver.step import step
 
 
 def simulate(h: float) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""solver.fast.sim.Sim (in-place stepping) against fast_step, step by step: the same
+"""solver.compiled.sim.Sim (in-place stepping) against fast_step, step by step: the same
 kernel must give bit-identical states, and the steps it hands back (substeps, box–box
 contacts, monitor failures) must end the same way."""
 
@@ -14,9 +14,9 @@ from test_fast import box_chain, doll_inputs
 
 from puppetcli.bench import doll_scenes
 from puppetcli.rigfile import load_rig
+from solver.compiled.fast import fast_step
+from solver.compiled.sim import Sim
 from solver.errors import SimulationError
-from solver.fast import fast_step
-from solver.fast.sim import Sim
 from solver.model import build_model
 from solver.state import StepInput, initial_state
 
@@ -119,7 +119,7 @@ def test_a_doll_woken_by_a_push_falls_asleep_again_identically():
     state = initial_state(model)
     for _ in range(600):
         state, _ = fast_step(model, state)
-    assert state.body_asleep[1:].all()  # (the hips, clamped, never sleep: solver.sleep)
+    assert state.body_asleep[1:].all()  # (the hips, clamped, never sleep: solver.advance.sleep)
     force = np.zeros((model.nbody, 3))
     force[model.body_names.index("shin_r")] = [5.0, 0.0, 0.0]
     inputs = [StepInput(body_force=force)] + [None] * 300

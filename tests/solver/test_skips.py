@@ -11,10 +11,10 @@ import pytest
 from test_fast import doll_inputs
 
 from puppetcli.rigfile import load_rig
-from solver.fast import fast_step
+from solver.compiled.fast import fast_step
 from solver.model import build_model
+from solver.pipeline import step
 from solver.state import initial_state
-from solver.step import step
 
 DOLL = Path(__file__).resolve().parents[2] / "rigs" / "doll.yaml"
 

@@ -1,4 +1,4 @@
-"""Sleeping (solver.sleep): islands, falling asleep at rest, waking on every kind of
+"""Sleeping (solver.advance.sleep): islands, falling asleep at rest, waking on every kind of
 touch, and what sleeping changes against the same run awake."""
 
 from __future__ import annotations
@@ -12,9 +12,9 @@ from test_fast import lockstep
 
 from puppetcli.bench import doll_scenes, grip_inputs
 from solver import quat
-from solver.fast import fast_step
-from solver.grip import Pointer
-from solver.sleep import body_islands
+from solver.advance.sleep import body_islands
+from solver.compiled.fast import fast_step
+from solver.rows.grip import Pointer
 from solver.spec import ShapeSpec
 from solver.state import StepInput, initial_state
 from solver.stress_cases import free_bodies

@@ -10,16 +10,18 @@ import pytest
 from rigbuild import chain, rheology
 
 from solver import quat
-from solver.direct import direct_solve
-from solver.grip import Pointer, make_coupling
-from solver.integrate import free_velocity
+from solver.advance.integrate import free_velocity
 from solver.model import build_model
-from solver.pgs import pgs_solve
-from solver.reference import reference_solve
-from solver.response import dense_system, regularize, row_response, world_inverse_inertia
+from solver.pipeline import step
+from solver.rows.build import build_rows
+from solver.rows.grip import Pointer, make_coupling
+from solver.solve.direct import direct_solve
+from solver.solve.dispatch import warm_start
+from solver.solve.pgs import pgs_solve
+from solver.solve.reference import reference_solve
+from solver.solve.response import dense_system, regularize, row_response, world_inverse_inertia
 from solver.spec import LimitSpec
 from solver.state import StepInput, initial_state
-from solver.step import build_rows, step, warm_start
 
 
 def problem(model, state, inp=None):

@@ -18,7 +18,7 @@ from mcap.reader import make_reader
 
 from puppetcli import stress
 from puppetcli.cli import cli
-from solver.step import step
+from solver.pipeline import step
 from solver.stress_cases import Scene
 
 ROOT = Path(__file__).resolve().parents[2]

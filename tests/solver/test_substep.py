@@ -1,4 +1,4 @@
-"""Substeps for joints under tension (solver.substep): the criterion against its closed
+"""Substeps for joints under tension (solver.advance.substep): the criterion against its closed
 form, the substepped step against its parts, and the rope that needs it."""
 
 from __future__ import annotations
@@ -12,12 +12,12 @@ from rigbuild import chain
 
 from puppetcli import stress
 from solver import quat
-from solver.fast import fast_step
-from solver.grip import Pointer
+from solver.advance.substep import SAFE_RATE, model_substeps, pointer_at, run_substeps
+from solver.compiled.fast import fast_step
 from solver.model import build_model
+from solver.pipeline import step
+from solver.rows.grip import Pointer
 from solver.state import State, StepInput, initial_state
-from solver.step import step
-from solver.substep import SAFE_RATE, model_substeps, pointer_at, run_substeps
 
 
 def needed_in_world(model, state: State) -> int:

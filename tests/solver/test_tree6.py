@@ -1,4 +1,4 @@
-"""The written-out 6×6 kernels (solver.fast.tree6) against the loops of solver.fast.tree
+"""The written-out 6×6 kernels (solver.solve.tree6) against the loops of solver.solve.direct_kernel
 they replace for 6×6 blocks: bitwise equal on random blocks (the split elimination on
 blocks with its zero corner); and tree6.py is current."""
 
@@ -9,7 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from solver.fast import tree, tree6, unroll
+from solver.solve import direct_kernel as tree
+from solver.solve import tree6, unroll
 
 NODES = 3  # node 0 the block, node 1 its parent, node 2 spare
 
@@ -32,7 +33,7 @@ def _factored(rng, sign: float):
 def test_the_generated_file_is_current():
     path = Path(tree6.__file__)
     assert path == unroll.TARGET
-    assert path.read_text() == unroll.source(), "run: python -m solver.fast.unroll"
+    assert path.read_text() == unroll.source(), "run: python -m solver.solve.unroll"
 
 
 @pytest.mark.parametrize("sign", [1.0, -1.0])

@@ -1,0 +1,261 @@
+"""The compiled step: ``fast_step`` is ``solver.pipeline.step`` in one numba call.
+
+    from solver.compiled.fast import fast_step, supports
+    step_fn = fast_step if supports(model, inp) else solver.pipeline.step
+    state, report = step_fn(model, state, inp)
+
+Same pipeline, rows, row order, warm start by row key, solvers (direct by an exact
+linear-time elimination over the joint tree, PGS by ``solver.solve.pgs``'s kernel), the same
+State and StepReport, and the same errors: whenever the compiled step meets something
+it does not do itself — a box–box contact, a step the monitor rejects (non-finite,
+energy blow-up, joint torn apart), a degenerate direct system, inputs of unexpected
+shapes — it hands that step to ``solver.pipeline.step``, which then raises the usual
+SimulationError (step, time, bone) or computes the step.  Results agree with the numpy
+step to rounding (the tests compare them).
+
+Not compiled (``supports`` is False, ``fast_step`` simply runs the numpy step):
+method "reference", and box–box pairs that involve a movable body.
+
+The first call in a fresh checkout compiles the kernels (numba, cached on disk beside
+each kernel's source: solver.jit); later processes load them from the cache.  A FastModel
+holds workspaces: one model, one thread at a time.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import replace
+
+import numpy as np
+
+from solver.advance.substep import run_substeps
+from solver.compiled.entry import fast_kernel
+from solver.compiled.pack import FastModel, fast_model
+from solver.model import Model
+from solver.pipeline import step
+from solver.rows.grip_kernel import MODE_GRIP, MODE_NONE, MODE_TOUCH
+from solver.solve.dispatch_kernel import SUBSTEP
+from solver.state import State, StepInput, StepReport
+
+__all__ = ["fast_model", "fast_step", "supports"]
+
+SOLVER_NAMES = ("direct", "pgs", "hybrid")
+_F8, _I8, _B1 = np.dtype(np.float64), np.dtype(np.int64), np.dtype(np.bool_)
+_NO_VEC = np.zeros(16)  # the pointer / coupling argument when there is none (never read)
+_NO_INPUT = StepInput()  # frozen: one for every step without input
+
+
+def supports(model: Model, inp: StepInput | None = None) -> bool:
+    """True when ``fast_step`` compiles this model's steps (any StepInput is accepted)."""
+    return fast_model(model).reason is None
+
+
+def _arr(x, dtype: np.dtype, shape: tuple) -> np.ndarray | None:
+    """x as a C-contiguous writable array of dtype and shape (so the kernel's argument
+    types never change), or None if it has another shape (the numpy step then decides
+    what it means)."""
+    if not (
+        type(x) is np.ndarray and x.dtype == dtype and x.flags.c_contiguous and x.flags.writeable
+    ):
+        x = np.array(x, dtype=dtype, order="C")
+    return x if x.shape == shape else None
+
+
+def _state_arrays(fm: FastModel, state: State) -> tuple | None:
+    """The kernel's (x … τ, warm keys, warm λ); the arrays of the State fast_step returned
+    last are trusted as they are."""
+    if state is fm.last[0]:
+        return fm.last[1]
+    nb, nj = len(fm.m[15]), len(fm.m[0])
+    arrays = (
+        _arr(state.body_pos, _F8, (nb, 3)),
+        _arr(state.body_quat, _F8, (nb, 4)),
+        _arr(state.body_vel, _F8, (nb, 3)),
+        _arr(state.body_omega, _F8, (nb, 3)),
+        _arr(state.joint_q_sf, _F8, (nj, 3)),
+        _arr(state.joint_yielded, _B1, (nj,)),
+        _arr(state.joint_anchor, _F8, (nj, 4)),
+        _arr(state.joint_torque_avg, _F8, (nj,)),
+    )
+    awake = len(state.body_asleep) == 0  # a State made without the sleep fields
+    sleep = (
+        _arr(np.zeros(nb, bool) if awake else state.body_asleep, _B1, (nb,)),
+        _arr(np.zeros(nb) if awake else state.body_still, _F8, (nb,)),
+    )
+    nw = np.shape(state.warm_key)[:1]
+    warm = (_arr(state.warm_key, _I8, nw), _arr(state.warm_lam, _F8, nw))
+    if any(a is None for a in (*arrays, *sleep, *warm)):
+        return None
+    return (*arrays, arrays[4], *sleep), *warm  # τ is not read: q_sf, of its type, stands in
+
+
+def _input_arrays(fm: FastModel, inp: StepInput) -> tuple | None:
+    """The kernel's input tuple (force, torque, pointer (14,), coupling (16,), flags (5,)),
+    or None when the numpy step must decide what the input means.  The pointer and the
+    flags are fm's own arrays, rewritten for every step (they are read only during it)."""
+    nb = len(fm.zeros)
+    force, torque, ptr, cpl = inp.body_force, inp.body_torque, inp.pointer, inp.coupling
+    loads = (force is not None, torque is not None)
+    force = fm.zeros if force is None else _arr(force, _F8, (nb, 3))
+    torque = fm.zeros if torque is None else _arr(torque, _F8, (nb, 3))
+    if force is None or torque is None:
+        return None
+    pvec = cvec = _NO_VEC
+    mode, body, position_only = MODE_NONE, 0, False
+    if ptr is not None and (cpl is not None or ptr.radius > 0.0):
+        pvec, (pos, rotation, vel, omega) = fm.pvec, fm.pointer
+        try:
+            if not len(ptr.pos) == len(ptr.vel) == len(ptr.omega) == 3 == len(ptr.quat) - 1:
+                return None
+            pos[...], rotation[...], vel[...], omega[...] = ptr.pos, ptr.quat, ptr.vel, ptr.omega
+            pvec[13] = ptr.radius
+        except (TypeError, ValueError):  # not 13 numbers
+            return None
+        mode = MODE_TOUCH
+    if mode == MODE_TOUCH and cpl is not None:  # a pointer that grips
+        if cpl is not fm.coupling[0]:  # checked once per Coupling (frozen)
+            cvec = _coupling_vec(cpl)
+            if not 0 <= cpl.body < nb or cvec.shape != (16,):
+                return None
+            fm.coupling = (cpl, cvec, (MODE_GRIP, cpl.body, bool(cpl.position_only)))
+        cvec, (mode, body, position_only) = fm.coupling[1], fm.coupling[2]
+    flags = (mode, body, position_only, *loads)
+    if flags != fm.flags:  # comparing costs a tenth of writing
+        fm.ivec[:], fm.flags = flags, flags
+    return force, torque, pvec, cvec, fm.ivec
+
+
+def _coupling_vec(cpl) -> np.ndarray:
+    """anchor (3), offset (3), rest (4), stiffness, damping, rot_stiffness, rot_damping,
+    force_limit, torque_limit."""
+    gains = (cpl.stiffness, cpl.damping, cpl.rot_stiffness, cpl.rot_damping,
+             cpl.force_limit, cpl.torque_limit)  # fmt: skip
+    return np.concatenate((cpl.anchor, cpl.offset, cpl.rest, gains), dtype=_F8)
+
+
+def entry_point(dispatcher):
+    """A caller of ``dispatcher`` that, once its one signature is compiled (or loaded from
+    the cache), calls the compiled entry point directly, skipping numba's type
+    resolution of every argument (their types never change: _arr and the packing
+    normalise every array).  Returns the list whose item 0 is the function to call."""
+    entry = [None]
+
+    def first(*args):
+        result = dispatcher(*args)
+        if len(dispatcher.signatures) == 1:
+            entry[0] = dispatcher.overloads[dispatcher.signatures[0]].entry_point
+        return result
+
+    entry[0] = first
+    return entry
+
+
+_KERNEL = entry_point(fast_kernel)
+
+
+def new_state_arrays(nb: int, nj: int) -> tuple:
+    """Uninitialised (x, q, v, ω, q_sf, yielded, anchor, τ_avg, τ, asleep, still) for the
+    kernel's out."""
+    e = np.empty
+    return (e((nb, 3)), e((nb, 4)), e((nb, 3)), e((nb, 3)), e((nj, 3)), e(nj, _B1),
+            e((nj, 4)), e(nj), e((nj, 3)), e(nb, _B1), e(nb))  # fmt: skip
+
+
+def fast_step(model: Model, state: State, inp: StepInput | None = None) -> tuple[State, StepReport]:
+    """Advance one step of size model.options.h, exactly as ``solver.pipeline.step``."""
+    inp = inp or _NO_INPUT
+    fm = fast_model(model)
+    if fm.reason is not None:
+        return step(model, state, inp)
+    try:
+        st, ins = _state_arrays(fm, state), _input_arrays(fm, inp)
+    except (TypeError, ValueError, AttributeError):
+        st = ins = None
+    if st is None or ins is None:
+        return step(model, state, inp)
+    prev, keys, lam = st
+    out, rep_f = new_state_arrays(len(prev[0]), len(prev[4])), np.empty(10)
+    status, warm_key, warm_lam = _KERNEL[0](fm.flat, prev, keys, lam, ins, out, fm.rep_i, rep_f)
+    if status == SUBSTEP:
+        return run_substeps(model, state, inp, int(fm.rep_i[0]), fast_step)
+    if status:
+        return step(model, state, inp)
+    time, steps = state.time + model.options.h, state.step + 1
+    new = _successor(state, time, steps, out, warm_key, warm_lam)
+    fm.last = (new, (out, warm_key, warm_lam))
+    return new, kernel_report(fm.rep_i, rep_f)
+
+
+FIELDS = (
+    "body_pos", "body_quat", "body_vel", "body_omega", "joint_q_sf", "joint_yielded",
+    "joint_anchor", "joint_torque_avg", "joint_torque", "warm_key", "warm_lam",
+    "body_asleep", "body_still",
+)  # fmt: skip
+"""State's fields after time and step, in their order: the kernel's out (x … τ), warm,
+then the kernel's sleep arrays."""
+
+
+def _direct(cls, names: tuple) -> tuple | None:
+    """The (name, default factory) of the fields of ``cls`` after ``names`` when
+    ``cls(**values)`` sets the fields ``names`` from ``values`` and the rest from their
+    defaults and does nothing else (a frozen dataclass's generated ``__init__``): then a
+    new instance whose ``__dict__`` is filled in one call is the same object, as
+    ``copy.copy`` and ``pickle`` make them, ~2–3 µs cheaper than that ``__init__``'s one
+    object.__setattr__ per field.  None for any other class."""
+    fields = dataclasses.fields(cls)
+    if tuple(f.name for f in fields[: len(names)]) != names or hasattr(cls, "__post_init__"):
+        return None
+    rest = []
+    for f in fields[len(names) :]:
+        if f.default_factory is not dataclasses.MISSING:
+            rest.append((f.name, f.default_factory))
+        elif f.default is not dataclasses.MISSING:
+            rest.append((f.name, lambda value=f.default: value))
+        else:
+            return None
+    return None if "__slots__" in vars(cls) or not all(f.init for f in fields) else tuple(rest)
+
+
+_NEW = object.__new__
+_STATE_REST = _direct(State, ("time", "step", *FIELDS))
+_REPORT_FIELDS = ("rows", "contacts", "iterations", "residual", "solver", "grip_force",
+                  "grip_torque", "touch_force", "substeps")  # fmt: skip
+_DIRECT_REPORT = _direct(StepReport, _REPORT_FIELDS) == ()
+
+
+def _successor(state: State, time: float, steps: int, out: tuple, keys, lam) -> State:
+    """The State after ``state``: time, steps, the kernel's out (x … τ), warm keys and λ
+    (a subclass of State keeps its other fields, as ``replace`` does)."""
+    if type(state) is State and _STATE_REST is not None:
+        new = _NEW(State)
+        values = new.__dict__
+        values.update(
+            time=time, step=steps, body_pos=out[0], body_quat=out[1], body_vel=out[2],
+            body_omega=out[3], joint_q_sf=out[4], joint_yielded=out[5], joint_anchor=out[6],
+            joint_torque_avg=out[7], joint_torque=out[8], warm_key=keys, warm_lam=lam,
+            body_asleep=out[9], body_still=out[10],
+        )  # fmt: skip
+        for name, default in _STATE_REST:  # fields the kernel does not produce
+            values[name] = default()
+        return new
+    arrays = dict(zip(FIELDS, (*out[:9], keys, lam, *out[9:]), strict=True))
+    if type(state) is State:
+        return State(time=time, step=steps, **arrays)
+    return replace(state, time=time, step=steps, **arrays)
+
+
+def kernel_report(rep_i: np.ndarray, rep_f: np.ndarray) -> StepReport:
+    """The StepReport of the kernel's report arrays (rows, contacts, iterations, solver;
+    residual, grip force, grip torque, touch force).  Its vectors are views of rep_f: pass
+    an array of the caller's own."""
+    rows, contacts, iterations, solver = rep_i.tolist()
+    values = dict(
+        rows=rows, contacts=contacts, iterations=iterations, residual=float(rep_f[0]),
+        solver=SOLVER_NAMES[solver], grip_force=rep_f[1:4], grip_torque=rep_f[4:7],
+        touch_force=rep_f[7:10], substeps=1,
+    )  # fmt: skip
+    if not _DIRECT_REPORT:
+        return StepReport(**values)
+    report = _NEW(StepReport)
+    report.__dict__.update(values)
+    return report

@@ -1,0 +1,145 @@
+"""A simulation whose state lives in arrays the compiled step updates in place.
+
+``fast_step`` returns a new State every step, as ``solver.pipeline.step`` does, and a State
+is a dozen fresh arrays: allocating them, passing them in and out of the compiled step,
+building the State and its report and dropping the previous one is most of what a step
+costs outside the kernel.  ``Sim`` keeps the state in its own arrays and steps them in
+place (as MuJoCo's mjData), so a step only passes its input in and its report out:
+
+    sim = Sim(model)                 # or Sim(model, state)
+    for inp in inputs:
+        report = sim.step(inp)       # the same StepReport as fast_step's
+    state = sim.state                # a State (a copy) whenever one is wanted
+
+``sim.advance(inp)`` is the step without its report (as mj_step on mjData): a loop then
+reads what it needs, ``sim.contacts``, ``sim.report``, ``sim.state``.
+
+On the doll's grip scene at h = 1 ms ``advance`` costs ~6 µs outside the kernel's own
+work (packing the input ~3, unboxing the 15 arrays ~1.6; ``step`` 3–5 µs more for the
+report), against ~35 µs for fast_step (docs/performance.md).  The states are exactly
+fast_step's (the same kernel); a step the kernel hands back (substeps, a box–box
+contact, a monitor failure, an unsupported model) runs through ``fast_step`` on a
+snapshot, so errors and results are the same too.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from solver.compiled.entry import SIM_SCHEMA, inplace_kernel
+from solver.compiled.fast import _NO_INPUT, _input_arrays, entry_point, fast_step, kernel_report
+from solver.compiled.flat import flatten
+from solver.compiled.kernel import step_arrays
+from solver.compiled.pack import fast_model
+from solver.model import Model
+from solver.solve.dispatch_kernel import OK
+from solver.state import State, StepInput, StepReport, initial_state
+
+_FIELDS = (
+    "body_pos", "body_quat", "body_vel", "body_omega", "joint_q_sf", "joint_yielded",
+    "joint_anchor", "joint_torque_avg", "joint_torque", "body_asleep", "body_still",
+)  # fmt: skip
+_BOOL = ("joint_yielded", "body_asleep")
+_KERNEL = entry_point(inplace_kernel)
+
+
+class Sim:
+    """One model's simulation, stepped in place (module docstring).  One thread at a time.
+
+    Its arrays are views of one set of flat buffers (solver.compiled.entry.SIM_SCHEMA),
+    passed to the step whole: its own copy of the packed model and its workspaces, two
+    sets of state arrays (``_FIELDS``; a step reads set ``_phase`` and writes the other,
+    since it must not overwrite what it still reads and a step handed back to fast_step
+    must find the old state intact), the warm keys and λ, the report."""
+
+    def __init__(self, model: Model, state: State | None = None) -> None:
+        self.model = model
+        self._fm = fm = fast_model(model)
+        rest, nb, rows = initial_state(model), len(fm.zeros), len(fm.ws[0][0])
+        sets = tuple(tuple(np.zeros_like(_field(rest, f, nb)) for f in _FIELDS) for _ in range(2))
+        warm = (np.zeros(rows, np.int64), np.zeros(rows), np.zeros(1, np.int64))
+        packed = (fm.m, fm.g, fm.tree, fm.ptree, fm.ws, fm.pws, fm.opt, fm.iopt)
+        scratch = step_arrays(nb, len(fm.m[0]), rows, len(fm.tree[1]))
+        parts = (*packed, *sets, warm, np.zeros(4, np.int64), np.zeros(10), scratch)
+        self._flat, views = flatten(parts, SIM_SCHEMA)
+        self._sets, self._warm, self._rep_i, self._rep_f = views[8:10], *views[10:13]
+        self.load(rest if state is None else state)
+
+    def load(self, state: State) -> None:
+        """Make ``state`` the current state (copied)."""
+        nb, nj = len(self._fm.zeros), len(self._fm.m[0])
+        current = tuple(_field(state, f, nb) for f in _FIELDS)
+        if [a.shape for a in current] != [a.shape for a in self._sets[0]]:  # the step trusts these
+            raise ValueError(f"Sim.load: not a state of this model ({nb} bodies, {nj} joints)")
+        keys, lam, count = self._warm
+        n = len(state.warm_key)
+        if n > len(keys):  # more rows than this model can make
+            raise ValueError(f"Sim.load: not a state of this model ({n} warm rows)")
+        for target, value in zip(self._sets[0], current, strict=True):
+            target[...] = value
+        keys[:n], lam[:n], count[0] = state.warm_key, state.warm_lam, n
+        self._phase = 0
+        self.time, self.steps = float(state.time), int(state.step)
+        self._handed_back: StepReport | None = None  # the report of a step fast_step made
+
+    @property
+    def state(self) -> State:
+        """The current state, as a State of its own arrays."""
+        n = int(self._warm[2][0])
+        current = self._sets[self._phase]
+        arrays = {f: a.copy() for f, a in zip(_FIELDS, current, strict=True)}
+        return State(
+            time=self.time, step=self.steps, warm_key=self._warm[0][:n].copy(),
+            warm_lam=self._warm[1][:n].copy(), **arrays,
+        )  # fmt: skip
+
+    def step(self, inp: StepInput | None = None) -> StepReport:
+        """Advance one step of size model.options.h, exactly as ``fast_step``; its report."""
+        self.advance(inp)
+        return self.report
+
+    def advance(self, inp: StepInput | None = None) -> None:
+        """``step`` without making the report (~3–5 µs of Python), as mj_step: what a loop
+        needs afterwards it reads (``report``, ``contacts``, ``state``)."""
+        inp = inp or _NO_INPUT
+        fm = self._fm
+        ins = _input_arrays(fm, inp) if fm.reason is None else None
+        if ins is not None:
+            status, _ = _KERNEL[0](self._flat, self._phase, ins)
+            if status == OK:
+                self._phase ^= 1
+                self.time += self.model.options.h
+                self.steps += 1
+                self._handed_back = None
+                return
+        new, report = fast_step(self.model, self.state, inp)
+        self.load(new)
+        self._handed_back = report
+
+    @property
+    def report(self) -> StepReport:
+        """The last step's StepReport (a new one each time: its vectors are its own)."""
+        if self._handed_back is not None:
+            return self._handed_back
+        return kernel_report(self._rep_i, self._rep_f.copy())
+
+    @property
+    def contacts(self) -> int:
+        """The last step's contact count (StepReport.contacts), without the report."""
+        if self._handed_back is not None:
+            return self._handed_back.contacts
+        return int(self._rep_i[1])
+
+    @property
+    def substeps(self) -> int:
+        """The last step's substeps (StepReport.substeps: > 1 when it was subdivided)."""
+        return 1 if self._handed_back is None else self._handed_back.substeps
+
+
+def _field(state: State, name: str, nb: int) -> np.ndarray:
+    """A field of ``state`` as the step's array (the sleep fields of a State without them:
+    all awake)."""
+    value = getattr(state, name)
+    if name in ("body_asleep", "body_still") and len(value) == 0:
+        value = np.zeros(nb)
+    return np.array(value, dtype=np.bool_ if name in _BOOL else np.float64, order="C")

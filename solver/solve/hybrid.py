@@ -1,0 +1,132 @@
+"""Exact joints, iterated contacts: the mixed LCP reduced to the rows that need iterating.
+
+Rows fall into three sets:
+
+* X, solved exactly: the joints' rows (ball-joint anchors, rheology: no bounds) and the
+  grip's rows (box-bounded, compliant) while they are inside their bounds;
+* P, pinned: grip rows at a force limit, their force fixed at the bound;
+* U, iterated: contacts, their friction and joint limits, except the *dormant* ones:
+  one-sided rows that did not push last step (warm λ = 0) and ask for no push now
+  (bias > 0: a speculative gap, a limit not yet reached), with their friction rows.
+
+With r = Qλ + c (Q = A + diag(C), solver.solve.response.dense_system) and the pinned forces
+folded into c, r_X = 0 holds exactly by λ_X = −Q_XX⁻¹ (c_X + Q_XU λ_U), which leaves
+
+    r_U = S λ_U + s,   S = Q_UU − Q_UX Q_XX⁻¹ Q_XU,   s = c_U − Q_UX Q_XX⁻¹ c_X.
+
+S is the Delassus operator of the iterated rows *through the joints*: a contact on a
+light link sees the effective mass of the whole articulated body behind it, so projected
+Gauss–Seidel on S (solver.solve.pgs.dense_pgs, warm-started, ``iterations`` sweeps) does not
+stall on mass ratios along a chain as PGS on the whole table does, and the joints hold
+to the accuracy of the elimination however few sweeps run.  S is small and dense.
+
+After the solve the sets are checked, as in an active-set method: a dormant row with
+r < 0 (it would be crossed) wakes into U, a free grip row outside its box is pinned, a
+pinned one whose r no longer pushes against its bound is freed; then the solve repeats
+(at most ``rounds`` times).  Dormant rows left at λ = 0 with r ≥ 0 satisfy their
+complementarity exactly, so skipping them changes nothing but the cost.
+
+This is the readable version; solver.compiled.fast does the same with the joint tree's
+linear-time elimination in place of the dense Q_XX factorisation.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.linalg
+
+from solver.rows.table import KIND_GRIP, KIND_JOINT, KIND_RHEOLOGY, Rows
+from solver.solve.pgs import dense_pgs
+from solver.solve.response import dense_system
+
+
+def equality_rows(rows: Rows) -> np.ndarray:
+    """(n,) bool: the joints' rows (anchors and rheology), always solved exactly."""
+    return (rows.kind == KIND_JOINT) | (rows.kind == KIND_RHEOLOGY)
+
+
+def dormant_rows(rows: Rows, lam0: np.ndarray) -> np.ndarray:
+    """(n,) bool: one-sided rows with λ0 = 0 and bias > 0, and the friction of those."""
+    one_sided = (rows.lo == 0.0) & np.isinf(rows.hi) & (rows.fric_of < 0)
+    normal = one_sided & (lam0 == 0.0) & (rows.bias > 0.0)
+    return normal | ((rows.fric_of >= 0) & normal[np.maximum(rows.fric_of, 0)])
+
+
+def _solve_spd(q: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    try:
+        return scipy.linalg.cho_solve(scipy.linalg.cho_factor(q), rhs)
+    except np.linalg.LinAlgError:
+        return np.linalg.lstsq(q, rhs, rcond=None)[0]
+
+
+def schur_system(q: np.ndarray, c: np.ndarray, exact: np.ndarray, it: np.ndarray) -> tuple:
+    """(S, s, X, x0) over the rows ``it`` with the rows ``exact`` eliminated:
+    X = Q_XX⁻¹ Q_XU, x0 = Q_XX⁻¹ c_X, so λ_X = −(x0 + X λ_U)."""
+    e, u = np.flatnonzero(exact), np.flatnonzero(it)
+    if len(e) == 0:
+        return q[np.ix_(u, u)], c[u], np.zeros((0, len(u))), np.zeros(0)
+    x = _solve_spd(q[np.ix_(e, e)], np.column_stack((c[e], q[np.ix_(e, u)])))
+    x0, xu = x[:, 0], x[:, 1:]
+    s_mat = q[np.ix_(u, u)] - q[np.ix_(u, e)] @ xu
+    return 0.5 * (s_mat + s_mat.T), c[u] - q[np.ix_(u, e)] @ x0, xu, x0
+
+
+def _local_friction(rows: Rows, it: np.ndarray) -> np.ndarray:
+    """fric_of of the rows ``it`` as indices into that subset (a friction row's normal is
+    always in the same set: they wake and sleep together)."""
+    u = np.flatnonzero(it)
+    local = np.full(len(rows), -1, dtype=np.int64)
+    local[u] = np.arange(len(u))
+    return np.where(rows.fric_of[u] >= 0, local[np.maximum(rows.fric_of[u], 0)], -1)
+
+
+def _round(rows, q, c, lam0, exact, it, pinned_lam, iterations, tol) -> tuple:
+    """λ (with pinned rows at pinned_lam, NaN elsewhere), sweeps and residual of one solve."""
+    pinned = ~np.isnan(pinned_lam)
+    lam = np.where(pinned, pinned_lam, 0.0)
+    c_eff = c + q[:, pinned] @ lam[pinned]
+    s_mat, s_vec, xu, x0 = schur_system(q, c_eff, exact, it)
+    lam_u, sweeps, residual = np.zeros(0), 0, 0.0
+    if it.any():
+        lam_u, sweeps, residual = dense_pgs(
+            s_mat, s_vec, rows.lo[it], rows.hi[it], _local_friction(rows, it), rows.mu[it],
+            lam0[it], iterations, tol,
+        )  # fmt: skip
+    lam[it] = lam_u
+    lam[exact] = -(x0 + xu @ lam_u)
+    return lam, sweeps, residual
+
+
+def hybrid_solve(
+    rows: Rows,
+    resp: tuple[np.ndarray, np.ndarray],
+    vel_free: np.ndarray,
+    lam0: np.ndarray,
+    iterations: int,
+    tol: float = 1e-12,
+    rounds: int = 20,
+    skip_dormant: bool = True,
+) -> tuple[np.ndarray, int, float]:
+    """(λ, sweeps, residual) (module docstring); sweeps and residual are those of the
+    last round's PGS on S (0 when nothing is iterated).  ``skip_dormant`` False iterates
+    the dormant rows too (the unskipped path, for measuring the skip)."""
+    q, c = dense_system(rows, resp, vel_free)
+    joint, grip = equality_rows(rows), rows.kind == KIND_GRIP
+    dormant = dormant_rows(rows, lam0) & ~grip & skip_dormant
+    at_lo, at_hi = np.zeros(len(rows), bool), np.zeros(len(rows), bool)
+    for _ in range(rounds):
+        pinned_lam = np.where(at_lo, rows.lo, np.where(at_hi, rows.hi, np.nan))
+        exact = joint | (grip & ~at_lo & ~at_hi)
+        it = ~joint & ~grip & ~dormant
+        lam, sweeps, residual = _round(rows, q, c, lam0, exact, it, pinned_lam, iterations, tol)
+        r = q @ lam + c
+        crossed = dormant & (rows.fric_of < 0) & (r < 0.0)
+        woke = crossed | ((rows.fric_of >= 0) & crossed[np.maximum(rows.fric_of, 0)])
+        release = (at_hi & (r > 0.0)) | (at_lo & (r < 0.0))
+        free = grip & ~at_lo & ~at_hi
+        leave_lo, leave_hi = free & (lam < rows.lo), free & (lam > rows.hi)
+        if not (woke.any() or release.any() or leave_lo.any() or leave_hi.any()):
+            return lam, sweeps, residual
+        dormant &= ~woke
+        at_lo, at_hi = (at_lo & ~release) | leave_lo, (at_hi & ~release) | leave_hi
+    return np.clip(lam, rows.lo, rows.hi), sweeps, residual

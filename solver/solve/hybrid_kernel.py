@@ -1,0 +1,274 @@
+"""Compiled hybrid solve (solver.solve.hybrid): joints and grip exact by the tree, the active
+bounded rows by PGS on their Schur complement, dormant rows checked afterwards.
+
+The joints' rows are the first ``ne`` rows of the table; grip rows are rows grip0 …
+grip0 + ngrip − 1 (a node of the forest while inside their bounds, pinned at a bound
+otherwise, as in the direct solve); every other row is iterated (U) or dormant (solver.
+hybrid.dormant_rows).  With the forest factored once per round (tree_factor), each U
+row r costs one substitution: the body right-hand side J_rᵀ gives every body's velocity
+change per unit λ_r with the joints and grip holding, so S[:, r] = J_U y⁽ʳ⁾ + C_r e_r; it
+runs forward only on the root paths of r's bodies and backward only on those of the U
+rows' bodies.  The base substitution (U forces zero) gives s = J_U (v_free + y⁽⁰⁾) + β_U.
+After PGS on S (solver.solve.pgs.dense_pgs), one more substitution with the U forces folded
+into v_free gives λ of the exact rows and the velocities.  Without U rows one
+substitution does it all.
+"""
+
+from __future__ import annotations
+
+import inspect
+
+import numpy as np
+
+from solver.compiled.flat import square
+from solver.jit import kernel
+from solver.rows.table import KIND_GRIP
+from solver.solve import hybrid
+from solver.solve.direct_kernel import (
+    ALL,
+    backward_pass,
+    forest_sequence,
+    forward_pass,
+    init_nodes,
+    init_rhs,
+    row_velocity,
+    tree_factor,
+    tree_substitute,
+)
+from solver.solve.pgs import dense_pgs_into
+from solver.solve.response_kernel import apply_listed, copy6
+
+ROUNDS = inspect.signature(hybrid.hybrid_solve).parameters["rounds"].default
+NU_CAP = 64  # iterated rows whose Schur complement fits the step's scratch (kernel.step_arrays)
+
+
+@kernel(error_model="numpy")
+def _body_dot(rw, r, x, movable):
+    """J_r · x over the movable sides of row r (x (nodes, 6), body nodes first)."""
+    a, b = rw[0][r], rw[1][r]
+    s = 0.0
+    if a >= 0 and movable[a] > 0.0:
+        for k in range(6):
+            s += rw[2][r, k] * x[a, k]
+    if b >= 0 and movable[b] > 0.0:
+        for k in range(6):
+            s += rw[3][r, k] * x[b, k]
+    return s
+
+
+@kernel(error_model="numpy")
+def _mark_path(body, parent, movable, mark, tag):
+    """mark[node] = tag on the path from a movable body to its root."""
+    if body < 0 or movable[body] <= 0.0:
+        return
+    node = body
+    while node >= 0 and mark[node] != tag:
+        mark[node] = tag
+        node = parent[node]
+
+
+@kernel(error_model="numpy", _nrt=False)
+def _schur(rw, its, nu, seq, nseq, parent, nb, size, tw, movable, x, path, needed, s_mat):
+    """S (nu, nu) into s_mat over the rows its[:nu], column by column (module docstring);
+    path, needed: (nodes,) int scratch."""
+    path[:] = 0
+    needed[:] = 0
+    for i in range(nu):
+        _mark_path(rw[0][its[i]], parent, movable, needed, 1)
+        _mark_path(rw[1][its[i]], parent, movable, needed, 1)
+    for k in range(nu):
+        r = its[k]
+        _mark_path(rw[0][r], parent, movable, path, k + 1)
+        _mark_path(rw[1][r], parent, movable, path, k + 1)
+        for q in range(nseq):
+            i = seq[q]
+            if path[i] == k + 1 or needed[i] == 1:
+                for c in range(6):
+                    x[i, c] = 0.0
+        a, b = rw[0][r], rw[1][r]
+        if a >= 0 and movable[a] > 0.0:
+            for c in range(6):
+                x[a, c] += rw[2][r, c]
+        if b >= 0 and movable[b] > 0.0:
+            for c in range(6):
+                x[b, c] += rw[3][r, c]
+        tree_substitute(seq, nseq, parent, nb, size, tw, x, path, k + 1, needed, 1)
+        for i in range(nu):
+            s_mat[i, k] = _body_dot(rw, its[i], x, movable)
+        s_mat[k, k] += rw[6][r]
+    for i in range(nu):
+        for k in range(i):
+            s_mat[i, k] = s_mat[k, i] = 0.5 * (s_mat[i, k] + s_mat[k, i])
+
+
+@kernel(error_model="numpy", _nrt=False)
+def _solve_exact(seq, nseq, parent, nb, movable, rows, size, tw, vel, lam, out, forward):
+    """λ of the forest's rows and out = vel + y, with v_free replaced by ``vel``, from
+    the right-hand sides of ``vel`` in tw[2] (init_rhs made them; forward False: init_nodes
+    made them and tree_factor has run the forward pass)."""
+    x = tw[2]
+    if forward:
+        forward_pass(seq, nseq, parent, nb, size, tw, x, parent, ALL)
+    backward_pass(seq, nseq, parent, nb, size, tw, x, parent, ALL)
+    copy6(vel, out)
+    for q in range(nseq):
+        i = seq[q]
+        if i < nb:
+            if movable[i] > 0.0:
+                for k in range(6):
+                    out[i, k] += x[i, k]
+        else:
+            for k in range(size[i]):
+                lam[rows[i, k]] = x[i, k]
+
+
+@kernel(error_model="numpy", _nrt=False)
+def dormant_rows(rw, n, lam0, out):
+    """out[:n] ← solver.solve.hybrid.dormant_rows on the table's first n rows."""
+    lo, hi, bias, fric = rw[4], rw[5], rw[7], rw[8]  # (not rw[k] inside and/or: see _update_sets)
+    for i in range(n):
+        out[i] = False
+        if lo[i] == 0.0 and hi[i] == np.inf and fric[i] < 0:
+            out[i] = lam0[i] == 0.0 and bias[i] > 0.0
+    for i in range(n):
+        if fric[i] >= 0:
+            out[i] = out[fric[i]]
+
+
+@kernel(error_model="numpy", _nrt=False)
+def _iterate(rw, its, nu, lam0, local, lo, hi, fric, mu, start):
+    """PGS on S's rows: bounds, friction (indices local to its) and warm start into
+    lo … start [:nu]; local (≥ rows) int scratch, read only where its[:nu] wrote it."""
+    for i in range(nu):
+        local[its[i]] = i
+    for i in range(nu):
+        r = its[i]
+        lo[i], hi[i], mu[i], start[i], fric[i] = rw[4][r], rw[5][r], rw[9][r], lam0[r], -1
+        normal = rw[8][r]
+        if normal >= 0 and 0 <= local[normal] < nu and its[local[normal]] == normal:
+            fric[i] = local[normal]
+
+
+@kernel(error_model="numpy", _nrt=False)
+def _iterated(rw, its, nu, seq, nseq, parent, nb, size, tw, movable, lam0, iters, sv, s_mat):
+    """λ_U of the rows its[:nu] into sv's lam_u by PGS on their Schur complement (built in
+    s_mat (nu, nu)), the base velocities' s_U in sv's s_vec; (sweeps, residual)."""
+    ints, (s_vec, lo, hi, mu, start, lam_u, r_u) = sv[1], sv[2]
+    _schur(rw, its, nu, seq, nseq, parent, nb, size, tw, movable, tw[2], ints[4], ints[5], s_mat)
+    _iterate(rw, its, nu, lam0, ints[2], lo, hi, ints[3], mu, start)
+    return dense_pgs_into(nu, s_mat, s_vec, lo, hi, ints[3], mu, start, iters, 1e-12, lam_u, r_u)
+
+
+@kernel(error_model="numpy", _nrt=True)
+def _iterated_large(rw, its, nu, seq, nseq, parent, nb, size, tw, movable, lam0, iters, sv):
+    """``_iterated`` with S in a matrix made for it, for more than NU_CAP rows."""
+    s_mat = np.empty((nu, nu))
+    return _iterated(rw, its, nu, seq, nseq, parent, nb, size, tw, movable, lam0, iters, sv, s_mat)
+
+
+@kernel(error_model="numpy", inline="always")
+def _round(bw, tree, h, rw, lam, vel_p, its, nu, grips, lam0, iters, asleep, sv, vel):
+    """One solve with the current sets into lam and vel: (ok, sweeps, residual).
+    bw: the solvers' model arrays (solver.solve.dispatch_kernel.solve); grips = (free grip rows,
+    their count, the gripped body); sv: the solvers' scratch (kernel.step_arrays)."""
+    _, parent, _, _, seq, rows, size, tw = tree
+    joint_bone, mass, movable, resp_a, resp_b, _, inertia_w = bw
+    nb = len(vel_p)
+    free_grip, ngrip, body = grips
+    nseq = forest_sequence(tree, nb, movable, free_grip, ngrip, body, asleep, joint_bone)
+    init_nodes(seq, nseq, nb, rw, vel_p, h, mass, inertia_w, rows, size, tw[0], tw[2])
+    if not tree_factor(seq, nseq, parent, nb, rw, rows, size, tw):
+        return False, 0, 0.0
+    _solve_exact(seq, nseq, parent, nb, movable, rows, size, tw, vel_p, lam, vel, False)
+    if nu == 0:
+        return True, 0, 0.0
+    s_vec, lam_u, pushed = sv[2][0], sv[2][5], sv[3][1]
+    for i in range(nu):
+        s_vec[i] = row_velocity(rw, its[i], vel) + rw[7][its[i]]
+    if nu <= NU_CAP:
+        sweeps, residual = _iterated(rw, its, nu, seq, nseq, parent, nb, size, tw, movable,
+                                     lam0, iters, sv, square(sv[4], nu))  # fmt: skip
+    else:
+        sweeps, residual = _iterated_large(
+            rw, its, nu, seq, nseq, parent, nb, size, tw, movable, lam0, iters, sv
+        )
+    for i in range(nu):
+        lam[its[i]] = lam_u[i]
+    copy6(vel_p, pushed)
+    apply_listed(rw, its, nu, resp_a, resp_b, lam, pushed)
+    init_rhs(seq, nseq, nb, rw, pushed, rows, size, tw[2])
+    _solve_exact(seq, nseq, parent, nb, movable, rows, size, tw, pushed, lam, vel, True)
+    return True, sweeps, residual
+
+
+@kernel(error_model="numpy", inline="always")
+def hybrid_solve(bw, tree, h, rw, n, ne, vel_free, lam0, iterations, grip, skip, asleep, sv,
+                 lam, vel, rounds):  # fmt: skip
+    """(code, sweeps, residual) as solver.solve.hybrid.hybrid_solve, λ into lam[:n] and the
+    velocities into vel; code 0: the sets settled, 1: not within ``rounds`` (λ clipped to
+    its bounds), 2: the exact system is degenerate.  bw: the solvers' model arrays
+    (solver.solve.dispatch_kernel.solve); h: the step; ``skip``: leave dormant rows out of the
+    iteration; asleep (nb,) bool: sleeping bodies (their islands are not in the forest);
+    sv: the solvers' scratch (kernel.step_arrays: nothing is allocated unless more than
+    NU_CAP rows are iterated).  Without iterated rows (a table of joint and grip rows
+    only) this is the direct solve's active set on the grip (kernel.direct)."""
+    grip0, ngrip, body = grip
+    resp_a, resp_b = bw[3], bw[4]
+    (at_lo, at_hi, dormant), (its, pinned, _, _, _, _, free_grip) = sv[0], sv[1]
+    vel_p = sv[3][0]
+    if skip:
+        dormant_rows(rw, n, lam0, dormant)
+    for i in range(n):
+        at_lo[i], at_hi[i], lam[i] = False, False, 0.0
+        if not skip:
+            dormant[i] = False
+    lo, hi, kind = rw[4], rw[5], rw[11]
+    sweeps, residual = 0, 0.0
+    for _ in range(rounds):
+        nu, nfree, npin = 0, 0, 0
+        for i in range(ne, n):
+            lam[i] = lo[i] if at_lo[i] else hi[i] if at_hi[i] else 0.0
+            if at_lo[i] or at_hi[i]:
+                pinned[npin], npin = i, npin + 1
+            if kind[i] == KIND_GRIP:
+                if not (at_lo[i] or at_hi[i]):
+                    free_grip[nfree], nfree = i, nfree + 1
+            elif not dormant[i]:
+                its[nu], nu = i, nu + 1
+        copy6(vel_free, vel_p)
+        apply_listed(rw, pinned, npin, resp_a, resp_b, lam, vel_p)  # (most rounds: none)
+        ok, sweeps, residual = _round(
+            bw, tree, h, rw, lam, vel_p, its, nu, (free_grip, nfree, body), lam0, iterations,
+            asleep, sv, vel,
+        )  # fmt: skip
+        if not ok:
+            return 2, 0, 0.0
+        if not _update_sets(rw, ne, n, lam, vel, grip0, ngrip, dormant, at_lo, at_hi):
+            return 0, sweeps, residual
+    for i in range(n):
+        lam[i] = min(max(lam[i], lo[i]), hi[i])
+    return 1, sweeps, residual
+
+
+@kernel(error_model="numpy")
+def _update_sets(rw, ne, n, lam, vel, grip0, ngrip, dormant, at_lo, at_hi):
+    """Wake crossed dormant rows (and their friction), pin and free grip rows; True when
+    anything changed.
+
+    The row arrays are taken out of the table once: an array read from a tuple inside an
+    and/or costs two uncancelled reference counts each time (~300 ns, numba 0.68)."""
+    lo, hi, comp, bias, fric = rw[4], rw[5], rw[6], rw[7], rw[8]
+    changed = False
+    for i in range(ne, n):
+        r = row_velocity(rw, i, vel) + comp[i] * lam[i] + bias[i]
+        if dormant[i] and fric[i] < 0 and r < 0.0:
+            dormant[i], changed = False, True
+        elif grip0 <= i < grip0 + ngrip:
+            if (at_hi[i] and r > 0.0) or (at_lo[i] and r < 0.0):
+                at_lo[i], at_hi[i], changed = False, False, True
+            elif not (at_lo[i] or at_hi[i]) and (lam[i] < lo[i] or lam[i] > hi[i]):
+                at_lo[i], at_hi[i], changed = lam[i] < lo[i], lam[i] > hi[i], True
+    for i in range(ne, n):
+        if fric[i] >= 0 and dormant[i] and not dormant[fric[i]]:
+            dormant[i] = False
+    return changed
