@@ -4,14 +4,14 @@ Speed is reported as ratios measured in the same run, never as an absolute pass/
 against the paper's setting on the numpy step (PGS, 15 iterations, warm start; the
 readable reference implementation, ``solver.pipeline.step``) and, with ``--peers``, against
 MuJoCo on the same rig and scene (``puppetcli.peers.doll_timer``).  Every solver runs
-on the compiled step (``solver.compiled.fast.fast_step``, what the CLI uses); the numpy step is
+on the compiled step (``solver.Engine``'s default); the numpy step is
 measured only for the baseline unless asked, since it is ~40× slower and its other
 solvers say nothing about the CLI.
 
-Engines: ``fast`` is ``fast_step`` (a new State every step, as the numpy step and
-the CLI's script runner); ``sim`` is ``solver.compiled.sim.Sim``, the same kernel stepping
-its own arrays in place (as MuJoCo's mj_step steps mjData: the loop for driving a
-device); ``numpy`` is ``solver.pipeline.step``.
+Engines: ``fast`` is ``Engine.step`` on the compiled step (a new State every step);
+``sim`` is ``Engine.stepper()``, the same kernel stepping its own arrays in place (as
+MuJoCo's mj_step steps mjData: what the CLI's runs use); ``numpy`` is the numpy step
+(``Options.engine = "numpy"``, solver.pipeline) stepped in place.
 
 The scene (``run_timer``): the doll standing on its stand, its left forearm's end
 gripped (position only, ``GRIP``) and lifted by ``LIFT`` along a minimum-jerk path over
@@ -39,11 +39,9 @@ import numpy as np
 from puppetcli.pointer import Motion, pointer_over_step, still
 from puppetcli.rigfile import load_rig
 from solver import quat
-from solver.compiled.fast import fast_step
-from solver.compiled.sim import Sim
+from solver.engine import Engine
 from solver.errors import SimulationError
 from solver.model import Model, build_model
-from solver.pipeline import step
 from solver.rows.grip import make_coupling
 from solver.state import StepInput, StepReport, initial_state
 
@@ -113,16 +111,16 @@ GRIP_BONE = "forearm_l"
 
 
 class _Stepping:
-    """A run of ``step_fn`` (the numpy step or fast_step) from rest with Sim's ``advance``
-    and ``contacts``/``substeps``, so one loop times every engine (the method call costs
-    ~0.1 µs a step)."""
+    """A run of ``Engine.step`` (a new State a step) from rest with the stepper's
+    ``advance`` and ``contacts``/``substeps``, so one loop times every engine (the method
+    call costs ~0.1 µs a step)."""
 
-    def __init__(self, model: Model, step_fn) -> None:
-        self.model, self.step_fn, self.state = model, step_fn, initial_state(model)
+    def __init__(self, model: Model) -> None:
+        self.engine, self.state = Engine(model), initial_state(model)
         self.last: StepReport | None = None
 
     def advance(self, inp: StepInput) -> None:
-        self.state, self.last = self.step_fn(self.model, self.state, inp)
+        self.state, self.last = self.engine.step(self.state, inp)
 
     @property
     def contacts(self) -> int:
@@ -134,9 +132,9 @@ class _Stepping:
 
 
 ENGINES = {
-    "numpy": lambda model: _Stepping(model, step),
-    "fast": lambda model: _Stepping(model, fast_step),
-    "sim": Sim,
+    "numpy": lambda model: Engine(model.with_options(engine="numpy")).stepper(),
+    "fast": _Stepping,
+    "sim": lambda model: Engine(model).stepper(),
 }
 """engine → a run from rest of a model: an object with ``advance(inp)`` and the last
 step's ``contacts`` and ``substeps`` (Sim's interface; for Sim the report is not made,
@@ -380,7 +378,7 @@ def csv_text(rows: list[BenchRow]) -> str:
 
 def doll_stages(h: float, seconds: float) -> dict[str, float]:
     """µs per step of each stage of the compiled step on the doll grip scene (auto)."""
-    from solver.fast.bench import stage_profile
+    from puppetcli.bench_solver import stage_profile
 
     model = doll_scenes()["doll"].with_options(h=h, method="auto")
     inputs = grip_inputs(model, seconds, max(1, round(seconds / h)))

@@ -31,7 +31,7 @@ import numpy as np
 
 from puppetcli.bench import doll_scenes, grip_inputs
 from solver import quat
-from solver.compiled.fast import fast_step
+from solver.engine import Engine
 from solver.model import Model
 from solver.state import State, StepInput, initial_state
 
@@ -60,10 +60,10 @@ SETTLE = 3.0  # s: the sleep skip's untimed start (the legs are asleep after ~2 
 
 def run(model: Model, inputs: list[StepInput], start: State) -> tuple[float, list[State]]:
     """Wall seconds of the steps from ``start`` and the State after each."""
-    state, states = start, []
+    state, states, engine = start, [], Engine(model)
     start = time.perf_counter()
     for inp in inputs:
-        state, _ = fast_step(model, state, inp)
+        state, _ = engine.step(state, inp)
         states.append(state)
     return time.perf_counter() - start, states
 
@@ -100,9 +100,9 @@ def measure_skip(name: str, h: float, seconds: float, repeats: int) -> SkipRow:
 
 def _starts(model: Model, h: float) -> tuple[State, State]:
     """The doll after SETTLE s left alone (asleep), and the same with every island awake."""
-    state = initial_state(model)
+    state, engine = initial_state(model), Engine(model)
     for _ in range(round(SETTLE / h)):
-        state, _ = fast_step(model, state)
+        state, _ = engine.step(state)
     nb = model.nbody
     return state, replace(state, body_asleep=np.zeros(nb, bool), body_still=np.zeros(nb))
 

@@ -8,28 +8,74 @@ requested (unclamped) and the displayed wrench are recorded.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
+Vec = tuple[float, float, float]
 
-def clamp_norm(v: np.ndarray, limit: float) -> np.ndarray:
+
+def norm3(v: Vec) -> float:
+    """|v|, computed as numpy computes each row's norm in ``display_many``."""
+    return math.sqrt(v[0] * v[0] + v[1] * v[1] + v[2] * v[2])
+
+
+def clamp_norm(v: Vec, limit: float) -> Vec:
     """v scaled down to norm ``limit`` if longer."""
-    n = float(np.linalg.norm(v))
-    return v * (limit / n) if n > limit else v
+    n = norm3(v)
+    if n <= limit:
+        return v
+    k = limit / n
+    return (v[0] * k, v[1] * k, v[2] * k)
+
+
+def row_norms(v: np.ndarray) -> np.ndarray:
+    """|v| of each row of v (n, 3): ``norm3`` of each, the same operations."""
+    return np.sqrt(v[:, 0] * v[:, 0] + v[:, 1] * v[:, 1] + v[:, 2] * v[:, 2])
+
+
+def clamp_rows(v: np.ndarray, limit: float) -> None:
+    """``clamp_norm`` of each row of v (n, 3), in place."""
+    n = row_norms(v)
+    over = n > limit
+    v[over] *= (limit / n[over])[:, None]
 
 
 class HapticChain:
-    """Low-pass and clamp, keeping the filter state between steps."""
+    """Low-pass and clamp, keeping the filter state between steps.  One wrench a step, in
+    Python floats (a few µs; numpy's per-call overhead would be most of a step's Python)."""
 
     def __init__(self, max_force: float, max_torque: float, lowpass: float) -> None:
         self.max_force = max_force
         self.max_torque = max_torque
         self.lowpass = lowpass
-        self.filtered = np.zeros(6)
+        self.filtered = (0.0,) * 6
 
-    def display(self, force: np.ndarray, torque: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(force, torque) displayed for the requested wrench on the hand."""
-        a = self.lowpass
-        self.filtered = a * self.filtered + (1.0 - a) * np.concatenate((force, torque))
-        return clamp_norm(self.filtered[:3], self.max_force), clamp_norm(
-            self.filtered[3:], self.max_torque
-        )
+    def display(self, force, torque) -> tuple[Vec, Vec]:
+        """(force, torque) displayed for the requested wrench on the hand (each any
+        sequence of three floats)."""
+        self.filtered = y = _low_pass(self.lowpass, self.filtered, (*force, *torque))
+        return clamp_norm(y[:3], self.max_force), clamp_norm(y[3:], self.max_torque)
+
+    def display_many(self, requested: np.ndarray) -> np.ndarray:
+        """``display`` of each row of ``requested`` (n, 6: force, torque) in turn: the
+        displayed (n, 6), the same floats as row by row, and the filter as after the last."""
+        a, filtered = self.lowpass, [self.filtered]
+        append = filtered.append
+        for x in requested.tolist():
+            append(_low_pass(a, filtered[-1], x))
+        self.filtered = filtered[-1]
+        del filtered[0]
+        shown = np.array(filtered).reshape(-1, 6)
+        clamp_rows(shown[:, :3], self.max_force)
+        clamp_rows(shown[:, 3:], self.max_torque)
+        return shown
+
+
+def _low_pass(a: float, y: tuple, x) -> tuple:
+    """One step of the one-pole low-pass on six floats: a·y + (1 − a)·x."""
+    b = 1.0 - a
+    return (
+        a * y[0] + b * x[0], a * y[1] + b * x[1], a * y[2] + b * x[2],
+        a * y[3] + b * x[3], a * y[4] + b * x[4], a * y[5] + b * x[5],
+    )  # fmt: skip

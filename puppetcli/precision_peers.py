@@ -24,7 +24,7 @@ from puppetcli import peers
 from puppetcli.bench import LIFT, repeats_for
 from puppetcli.precision import PrecisionRow
 from puppetcli.precision_scenes import CHAIN_TIMES, DOLL_LIFT, DOLL_TIMES, doll_model
-from solver.compiled.fast import fast_step
+from solver.engine import Engine
 from solver.errors import SimulationError
 from solver.observe import bone_tails, joint_gaps
 from solver.state import initial_state
@@ -80,10 +80,11 @@ def our_stability(h: float, seconds: float = DOLL_LIFT, method: str = "auto") ->
     model = doll_model().with_options(h=h, method=method)
     n = max(1, round(seconds / h))
     state, gap, speed, error = initial_state(model), 0.0, 0.0, ""
+    engine = Engine(model)
     b = model.bone_names.index(GRIP_BONE)
     try:
         for inp in grip_inputs(model, seconds, n):
-            state, _ = fast_step(model, state, inp)
+            state, _ = engine.step(state, inp)
             gap = max(gap, float(np.max(joint_gaps(model, state.body_pos, state.body_quat))))
             speed = max(speed, float(np.max(np.linalg.norm(state.body_vel, axis=1))))
     except SimulationError as exc:

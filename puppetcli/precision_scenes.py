@@ -35,7 +35,7 @@ import scipy.linalg
 
 from puppetcli.bench import grip_inputs
 from puppetcli.rigfile import load_rig
-from solver.compiled.sim import Sim
+from solver.engine import Engine
 from solver.model import Model, build_model
 from solver.observe import bone_heads, bone_tails, joint_rotations
 from solver.state import State, StepInput
@@ -169,7 +169,7 @@ def run_scene(sc: Scene) -> tuple[list[np.ndarray], list[float], float]:
     differences.  Reading a mark's sample (Sim.state, then sc.sample) is reading the
     result, not simulating: the clock stops for it."""
     marks, kept, walls, substeps = set(sc.marks), [], [], 0
-    sim, elapsed = Sim(sc.model), 0.0
+    sim, elapsed = Engine(sc.model).stepper(), 0.0
     start = time.perf_counter()
     for k, inp in enumerate(sc.inputs, start=1):
         sim.advance(inp)

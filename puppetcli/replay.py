@@ -47,7 +47,7 @@ from puppetcli.yamldoc import did_you_mean
 from solver import quat, quat1
 from solver.model import Model, build_model
 from solver.spec import RigSpec
-from solver.state import StepInput, StepReport
+from solver.state import StepInput
 
 __all__ = [
     "DeviceTrack",
@@ -79,6 +79,12 @@ class TrackLookup:
     def pose(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """World (position, quaternion) at time t, as ``pointer.Motion.pose``."""
         k = self.index(t)
+        return self.world_pos[k], self.world_quat[k]
+
+    def poses(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``pose`` at each of ``times``: (positions (n,3), quaternions (n,4))."""
+        k = np.searchsorted(self.time, times + 1e-9, side="right") - 1
+        k = np.clip(k, 0, len(self.time) - 1)
         return self.world_pos[k], self.world_quat[k]
 
 
@@ -295,8 +301,8 @@ class Replay:
     def pointer_active(self) -> bool:
         return bool((self.session.settings.get("pointer") or {}).get("active", True))
 
-    def runner(self, model: Model, trace=None, on_step=None) -> SessionRunner:
-        return SessionRunner(model, self, trace, on_step)
+    def runner(self, model: Model, trace=None, on_step=None, progress=None) -> SessionRunner:
+        return SessionRunner(model, self, trace, on_step, progress)
 
 
 def load_replay(path: Path, spec: RigSpec) -> Replay:
@@ -320,8 +326,12 @@ def replay_traced(path: Path, spec: RigSpec, trace_path: Path):
 class SessionRunner(Runner):
     """A Runner whose pointer follows the device track and that runs the tension programme."""
 
-    def __init__(self, model: Model, replay: Replay, trace=None, on_step=None) -> None:
-        super().__init__(model, replay.script, trace, on_step)
+    batch_steps = False  # the tension programme follows the displayed wrench step by step
+
+    def __init__(
+        self, model: Model, replay: Replay, trace=None, on_step=None, progress=None
+    ) -> None:
+        super().__init__(model, replay.script, trace, on_step, progress=progress)
         self.replay = replay
         self.motion = replay.track
         self.pointer_on = replay.pointer_active
@@ -339,17 +349,17 @@ class SessionRunner(Runner):
             detail = str(exc).split(": grip: ", 1)[-1]
             raise SessionError(
                 f"{self.replay.session.source}: /spidar/buttons grip at t = "
-                f"{self.state.time:.3f} s: {detail}"
+                f"{self.sim.time:.3f} s: {detail}"
             ) from None
 
-    def _after_step(self, inp: StepInput, report: StepReport) -> None:
-        super()._after_step(inp, report)
+    def _after_step(self, inp: StepInput) -> None:
+        super()._after_step(inp)
         if not self.pointer_on:
             return
         track, ws = self.replay.track, self.replay.session.workspace
-        k = track.index(self.state.time)
+        k = track.index(self.sim.time)
         to_device = quat1.conj(tuple(ws.orientation.tolist()))
-        wanted = tuple(np.array(quat1.rotate(to_device, tuple(v.tolist()))) for v in self.displayed)
+        wanted = tuple(np.array(quat1.rotate(to_device, v)) for v in self.displayed)
         self.tensions = self.distributor.display(track.device_pos[k], track.device_quat[k], *wanted)
         if self.trace is not None:
-            self.trace.spidar(self.state, track, k, self.tensions, wanted)
+            self.trace.spidar(self.sim.view(), track, k, self.tensions, wanted)

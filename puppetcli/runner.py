@@ -1,14 +1,15 @@
 """Run a manipulation script: the timeline, the pointer, grips, keys, expectations, trace.
 
-Actions run one after another on one timeline.  A timed action (push, wait, move,
-touch, rotate, twist) ends at its start time plus its duration; the simulation
-steps while t < t_end − h/2, so durations that are not multiples of h do not
-accumulate rounding.  Steps run on the compiled step (solver.compiled.fast.fast_step,
+Actions run one after another on one timeline. A timed action (push, wait, move, touch,
+rotate, twist) ends at its start time plus its duration; the simulation steps while t <
+t_end − h/2, so durations that are not multiples of h do not accumulate rounding. Steps
+run in place on the model's engine (solver.Engine's stepper: the compiled step,
 identical to solver.pipeline.step to rounding, which it falls back to for anything it
-does not handle).  The pointer keeps its last pose between motions, and a
-grip holds through waits and pushes until `release`.  A key captures the state
-when it is reached.  If the simulation fails, the keys and expectation results
-so far are returned with the error, and the trace keeps every step written.
+does not handle); a timed action's pointer poses are computed for all of its steps at
+once, so a step costs little Python beside the solver. The pointer keeps its last pose
+between motions, and a grip holds through waits and pushes until `release`. A key
+captures the state when it is reached. If the simulation fails, the keys and expectation
+results so far are returned with the error, and the trace keeps every step written.
 
 A session replay (puppetcli.replay) drives the same runner: its pointer follows the
 device's estimated pose (any object with ``pose(t)``, like ``Motion``) and its
@@ -26,15 +27,15 @@ import numpy as np
 
 from puppetcli.errors import ScriptError
 from puppetcli.expect import ExpectResult, check
-from puppetcli.haptics import HapticChain
+from puppetcli.haptics import HapticChain, norm3, row_norms
 from puppetcli.keyframes import KeyframeSet
-from puppetcli.pointer import Motion, pointer_over_step, still
+from puppetcli.pointer import Motion, still
 from puppetcli.runtrace import RunTrace
 from puppetcli.script import Key, Push, Script, Wait
 from puppetcli.script_actions import Expect, Grip, Move, Release, Rotate, Touch, Twist
 from puppetcli.snapshot import capture, push_input
 from solver import quat
-from solver.compiled.fast import fast_step
+from solver.engine import Engine
 from solver.errors import SimulationError
 from solver.model import Model
 from solver.observe import bone_points
@@ -46,7 +47,7 @@ from solver.rows.grip import (
     nearest_point,
     segment_distances,
 )
-from solver.state import State, StepInput, StepReport, initial_state
+from solver.state import State, StepInput, initial_state
 
 POINTER_ACTIONS = (Grip, Move, Rotate, Twist, Release, Touch)
 EVENT_SLACK = 1e-9  # s: an event "at" a step boundary despite float rounding of the time
@@ -104,6 +105,8 @@ def script_model(model: Model, script: Script) -> Model:
 class Runner:
     """Steps a model through a script."""
 
+    batch_steps = True  # a timed action's steps may run as one batch (``_batched``)
+
     def __init__(
         self,
         model: Model,
@@ -111,10 +114,12 @@ class Runner:
         trace: RunTrace | None = None,
         on_step: Callable[[State], None] | None = None,
         on_action: Callable[[object, float], None] | None = None,
+        progress: Callable[[int], None] | None = None,
     ) -> None:
         self.model, self.script, self.trace, self.on_step = model, script, trace, on_step
         self.on_action = on_action  # called after each action with the time it started
-        self.state = initial_state(model)
+        self.progress = progress  # called with the number of steps just taken
+        self.sim = Engine(model).stepper(initial_state(model))
         self.keys = KeyframeSet()
         self.motion: Motion = still(np.asarray(script.pointer_start, dtype=float), quat.IDENTITY)
         self.pointer_on = any(isinstance(a, POINTER_ACTIONS) for a in script.actions)
@@ -125,8 +130,18 @@ class Runner:
         self.haptics = HapticChain(script.max_force, script.max_torque, script.lowpass)
         self.expectations: list[ExpectResult] = []
         self.peak = self.peak_since_key = self.peak_displayed = 0.0
-        self.displayed = (np.zeros(3), np.zeros(3))  # the last step's wrench on the hand
+        self.displayed = ((0.0,) * 3, (0.0,) * 3)  # the last step's wrench on the hand
         self._handlers: dict | None = None
+
+    @property
+    def state(self) -> State:
+        """The current state (a copy: read it between actions, not every step)."""
+        return self.sim.state
+
+    @property
+    def time(self) -> float:
+        """The simulated time (s)."""
+        return self.sim.time
 
     def run(self, actions: tuple | None = None) -> RunResult:
         """Run every action (the script's unless given), then wait out the script's duration."""
@@ -136,11 +151,11 @@ class Runner:
             for action in self.script.actions if actions is None else actions:
                 self.act(action)
             if self.script.duration is not None:
-                self.advance(self.script.duration - self.state.time)
+                self.advance(self.script.duration - self.sim.time)
         except SimulationError as exc:
             error = exc
         return RunResult(
-            self.keys, self.state, self.state.step, time.perf_counter() - start,
+            self.keys, self.sim.state, self.sim.steps, time.perf_counter() - start,
             self.expectations, self.peak, self.peak_displayed, error,
         )  # fmt: skip
 
@@ -148,7 +163,7 @@ class Runner:
         """Carry out one action (steps the simulation for a timed one)."""
         if self._handlers is None:
             self._handlers = self._handler_table()
-        began = self.state.time
+        began = self.sim.time
         self._handlers[type(action)](action)
         if self.on_action is not None:
             self.on_action(action, began)
@@ -168,7 +183,7 @@ class Runner:
             Rotate: lambda a: self._turn(a.axis * a.angle, a.duration),
             Twist: self._twist,
             Until: lambda a: self.advance(
-                a.time - self.state.time + 0.5 * self.model.options.h - EVENT_SLACK
+                a.time - self.sim.time + 0.5 * self.model.options.h - EVENT_SLACK
             ),
             TouchMode: self._touch_mode,
             UndoKey: self._undo,
@@ -179,7 +194,7 @@ class Runner:
             return
         key = self.keys.pop()
         if self.trace is not None:
-            self.trace.keyframe(self.state.time, key.label, action.line, len(self.keys) + 1, True)
+            self.trace.keyframe(self.sim.time, key.label, action.line, len(self.keys) + 1, True)
 
     def _touch_mode(self, action: TouchMode) -> None:
         self.touch_enabled = action.on
@@ -190,22 +205,20 @@ class Runner:
         self.keys.add(capture(self.model, self.state, action.label, extra))
         self.peak_since_key = 0.0
         if self.trace is not None:
-            self.trace.keyframe(self.state.time, action.label, action.line, len(self.keys))
+            self.trace.keyframe(self.sim.time, action.label, action.line, len(self.keys))
 
     def _pointer_pose(self) -> tuple[np.ndarray, np.ndarray]:
-        return self.motion.pose(self.state.time)
+        return self.motion.pose(self.sim.time)
 
     def _move(self, action: Move | Touch) -> None:
         pos, q = self._pointer_pose()
         delta = action.by if action.by is not None else action.to - pos
-        self.motion = Motion(
-            self.state.time, action.duration, pos, q, np.asarray(delta), np.zeros(3)
-        )
+        self.motion = Motion(self.sim.time, action.duration, pos, q, np.asarray(delta), np.zeros(3))
         self.advance(action.duration)
 
     def _turn(self, rotvec: np.ndarray, duration: float) -> None:
         pos, q = self._pointer_pose()
-        self.motion = Motion(self.state.time, duration, pos, q, np.zeros(3), np.asarray(rotvec))
+        self.motion = Motion(self.sim.time, duration, pos, q, np.zeros(3), np.asarray(rotvec))
         self.advance(duration)
 
     def _twist(self, action: Twist) -> None:
@@ -258,40 +271,112 @@ class Runner:
         if not self.touch_enabled:
             return False
         if self.touch_suspended:
-            dist, _ = segment_distances(self.model, self.state, pos)
+            dist, _ = segment_distances(self.model, self.sim.view(), pos)
             gap = self.reach + self.script.pointer_radius + self.model.options.contact_margin
             self.touch_suspended = bool(np.any(dist <= gap))
         return not self.touch_suspended
 
     def advance(self, duration: float, push: Push | None = None) -> None:
         """Step until ``duration`` seconds have passed (nothing to do when ≤ 0)."""
-        h = self.model.options.h
-        t_end = self.state.time + duration
-        while self.state.time < t_end - 0.5 * h:
-            inp = self._input(push)
-            self.state, report = fast_step(self.model, self.state, inp)
-            self._after_step(inp, report)
+        sim, h = self.sim, self.model.options.h
+        t_end, starts, t = sim.time + duration, [], sim.time
+        while t < t_end - 0.5 * h:  # the times the stepper will reach, by the same sums
+            starts.append(t)
+            t += h
+        if not starts:
+            return
+        poses = self._poses(starts + [t]) if self.pointer_on else None
+        for k in range(len(starts)):
+            if self._batched(push):  # from here on, every input is known
+                self._run_batch(poses, k, len(starts))
+                return
+            inp = self._input(push, poses, k)
+            sim.advance(inp)
+            self._after_step(inp)
 
-    def _input(self, push: Push | None) -> StepInput:
-        loads = push_input(self.model, self.state, push) if push is not None else StepInput()
-        if not self.pointer_on:
-            return loads
-        free = self.coupling is None and self._touching(self.motion.pose(self.state.time)[0])
+    def _poses(self, times: list[float]) -> tuple:
+        """The pointer over every step between ``times``: positions and quaternions at
+        each time (n+1), mean velocities and angular velocities over each step (n): the
+        motion's poses, all at once."""
+        h = self.model.options.h
+        pos, q = self.motion.poses(np.array(times))
+        turn = quat.log(quat.mul(q[1:], quat.conj(q[:-1])))
+        return pos, q, (pos[1:] - pos[:-1]) / h, turn / h
+
+    def _batched(self, push: Push | None) -> bool:
+        """True when every input of the steps is known before they run and nothing needs
+        them one by one (no trace, no per-step callback, no push, no free pointer still
+        waiting to be clear of the bones)."""
+        waiting = self.coupling is None and self.touch_enabled and self.touch_suspended
+        return (
+            self.batch_steps and push is None and self.trace is None and self.on_step is None
+            and not (self.pointer_on and waiting)
+        )  # fmt: skip
+
+    def _input(self, push: Push | None, poses, k: int) -> StepInput:
+        loads = push_input(self.model, self.sim.view(), push) if push is not None else None
+        if poses is None:
+            return loads or StepInput()
+        pos, q, vel, omega = poses
+        free = self.coupling is None and self._touching(pos[k])
         radius = self.script.pointer_radius if free else 0.0
-        ptr = pointer_over_step(self.motion, self.state.time, self.model.options.h, radius)
+        ptr = Pointer(pos[k + 1], q[k + 1], vel[k], omega[k], radius)
+        if loads is None:
+            return StepInput(None, None, ptr, self.coupling)
         return StepInput(loads.body_force, loads.body_torque, ptr, self.coupling)
 
-    def _after_step(self, inp: StepInput, report: StepReport) -> None:
-        on_doll = report.grip_force if self.coupling is not None else report.touch_force
-        force = float(np.linalg.norm(on_doll))
+    def _run_batch(self, poses, first: int, end: int) -> None:
+        """Steps first … end − 1 of ``poses``, whose inputs are all known: stepped with
+        nothing else in the loop, their wrenches felt afterwards (the same floats as
+        step by step)."""
+        n = end - first
+        wrench = np.empty((n, 9))  # grip force, grip torque, touch force
+        if poses is None:
+            for row in wrench:
+                self.sim.advance()
+                self.sim.wrench_into(row)
+        else:
+            pos, q, vel, omega = poses
+            free = self.coupling is None and self.touch_enabled
+            radius = self.script.pointer_radius if free else 0.0
+            path = (
+                pos[first + 1 : end + 1],
+                q[first + 1 : end + 1],
+                vel[first:end],
+                omega[first:end],
+            )
+            self.sim.follow(path, radius, self.coupling, wrench)
+        self._feel(wrench)
+        if self.progress is not None:
+            self.progress(n)
+
+    def _feel(self, wrench: np.ndarray) -> None:
+        """Peaks and the haptic chain over the rows of ``wrench`` (n, 9), as
+        ``_after_step`` does row by row."""
+        on_doll = wrench[:, 0:3] if self.coupling is not None else wrench[:, 6:9]
+        requested = -np.concatenate((on_doll, wrench[:, 3:6]), axis=1)  # on the hand
+        force = float(row_norms(on_doll).max())
         self.peak = max(self.peak, force)
         self.peak_since_key = max(self.peak_since_key, force)
-        shown = self.haptics.display(-on_doll, -report.grip_torque)
-        self.displayed = shown
-        self.peak_displayed = max(self.peak_displayed, float(np.linalg.norm(shown[0])))
+        shown = self.haptics.display_many(requested)
+        self.displayed = (tuple(shown[-1, :3].tolist()), tuple(shown[-1, 3:].tolist()))
+        self.peak_displayed = max(self.peak_displayed, float(row_norms(shown[:, :3]).max()))
+
+    def _after_step(self, inp: StepInput) -> None:
+        grip_force, grip_torque, touch_force = self.sim.wrench()
+        fx, fy, fz = (grip_force if self.coupling is not None else touch_force).tolist()
+        tx, ty, tz = grip_torque.tolist()
+        requested = ((-fx, -fy, -fz), (-tx, -ty, -tz))  # on the hand
+        force = norm3((fx, fy, fz))
+        self.peak = max(self.peak, force)
+        self.peak_since_key = max(self.peak_since_key, force)
+        self.displayed = shown = self.haptics.display(*requested)
+        self.peak_displayed = max(self.peak_displayed, norm3(shown[0]))
+        if self.progress is not None:
+            self.progress(1)
         if self.on_step is not None:
-            self.on_step(self.state)
+            self.on_step(self.sim.state)
         if self.trace is not None:
             self.trace.step(
-                self.state, report, inp, self.coupling, (-on_doll, -report.grip_torque), shown
-            )
+                self.sim.view(), self.sim.report, inp, self.coupling, requested, shown,
+            )  # fmt: skip

@@ -30,7 +30,7 @@ import numpy as np
 from puppetcli.rigfile import load_rig
 from solver import stress_cases as sc
 from solver.collide.scene import collide
-from solver.compiled.fast import fast_step as step
+from solver.engine import Engine
 from solver.errors import SimulationError
 from solver.model import build_model
 from solver.observe import joint_gaps, momentum
@@ -151,13 +151,13 @@ def run_scene(scene: sc.Scene, method: str | None = None) -> CaseResult:
         scene = replace(scene, model=scene.model.with_options(method=method))
     model = scene.model
     meter = _Meter(scene)
-    state = scene.start
+    state, engine = scene.start, Engine(model)
     start = time.perf_counter()
     h = model.options.h
     try:
         for _ in range(round(scene.duration / h)):
             driven = scene.drive.active(state.time, h)
-            state, _ = step(model, state, scene.drive.input(model, state))
+            state, _ = engine.step(state, scene.drive.input(model, state))
             meter.res.steps += 1
             meter.see(state, driven)
     except SimulationError as exc:

@@ -39,9 +39,18 @@ def warm_up(prepare: Callable[[], object]) -> None:
         click.echo(f"solver ready ({took:.0f} s)", err=True)
 
 
-def warm_up_step(model) -> None:
-    """``warm_up`` with one throwaway compiled step of ``model`` from rest."""
-    from solver.compiled.fast import fast_step
-    from solver.state import StepInput, initial_state
+def compile_engine(model) -> None:
+    """One throwaway step of ``model`` from rest on each of its engine's paths, in place
+    (a run's steps) and to a new State (a step the stepper hands back): numba compiles or
+    loads them now rather than in the middle of a run."""
+    from solver.engine import Engine
+    from solver.state import initial_state
 
-    warm_up(lambda: fast_step(model, initial_state(model), StepInput()))
+    engine = Engine(model)
+    engine.stepper().advance()
+    engine.step(initial_state(model))
+
+
+def warm_up_step(model) -> None:
+    """``warm_up`` of ``compile_engine(model)``."""
+    warm_up(lambda: compile_engine(model))

@@ -62,6 +62,8 @@ class Options:
     solve instead of iterating them (solver.solve.hybrid); sleep: islands at rest and
     untouched for sleep_time (s), every body slower than sleep_speed (m/s) and
     sleep_spin (rad/s), are frozen until touched (solver.advance.sleep).
+    engine: "compiled" (the numba step, solver.compiled) or "numpy" (the readable
+    step, solver.pipeline): the implementation solver.Engine runs.
     """
 
     h: float = 0.005
@@ -87,6 +89,7 @@ class Options:
     sleep_speed: float = 5e-4
     sleep_spin: float = 5e-3
     sleep_time: float = 0.2
+    engine: str = "compiled"
 
 
 @dataclass(frozen=True)

@@ -89,6 +89,13 @@ SOLVER_CHOICES = [*SOLVERS, "reference"]
     help="Measure `puppetcli live`'s loop instead: real-time factor, headroom and "
     "input-to-frame latency with a scripted page (--h defaults to 1 and 5 ms here).",
 )
+@click.option(
+    "--pose",
+    is_flag=True,
+    help="Measure a scripted pose (rigs/doll.yaml scripts/wave.yaml, as `pose` runs it, "
+    "with and without its trace) against the bare in-place stepper on the same inputs "
+    "instead (--h: steps to run it at; default the script's own and 1 ms).",
+)
 @click.option("--quick", is_flag=True, help="With --precision: fewer settings and steps (CI).")
 @click.option(
     "--out",
@@ -107,6 +114,7 @@ def command(
     precision: bool,
     skips: bool,
     live: bool,
+    pose: bool,
     quick: bool,
     out_dir: Path | None,
 ) -> None:
@@ -139,6 +147,13 @@ def command(
         source = click.get_current_context().get_parameter_source("steps_h")
         default = source == click.core.ParameterSource.DEFAULT
         click.echo(format_live(measure_live([0.001, 0.005] if default else list(steps_h))))
+        return
+    if pose:
+        from puppetcli.bench_pose import format_pose, measure_pose
+
+        source = click.get_current_context().get_parameter_source("steps_h")
+        default = source == click.core.ParameterSource.DEFAULT
+        click.echo(format_pose(measure_pose([None, 0.001] if default else list(steps_h))))
         return
     if skips:
         from puppetcli.bench_skips import format_skips, measure_skips

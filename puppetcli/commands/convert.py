@@ -21,7 +21,6 @@ from puppetcli.script import load_script
 from puppetcli.skeleton import Skeleton
 from puppetcli.warmup import warm_up_step
 from solver.model import Model, build_model
-from solver.state import State
 
 MAX_STEPS = 10_000_000  # as `pose`: a run longer than this is a mistake in the script
 KEYS_FPS = 30.0  # Frame Time of a BVH of keys when no --fps is given
@@ -77,7 +76,7 @@ def command(
     runner = replay.runner(model) if replay is not None else Runner(model, plan)
     sampler = FrameSampler(model, fps, runner.state) if fps is not None else None
     with _progress(_total_steps(model, plan)) as tick:
-        runner.on_step = _chain(sampler, tick)
+        runner.on_step, runner.progress = sampler, tick
         result = runner.run()
     frames = sampler.frames if sampler is not None else list(result.keys)
     if not frames:
@@ -98,24 +97,11 @@ def _total_steps(model: Model, plan) -> int:
     return round(max(plan.duration or 0.0, timeline) / model.options.h)
 
 
-def _chain(*callbacks: Callable[[State], None] | None) -> Callable[[State], None] | None:
-    """One callback calling every non-None one in turn (None if there are none)."""
-    live = [c for c in callbacks if c is not None]
-    if not live:
-        return None
-
-    def call_all(state: State) -> None:
-        for callback in live:
-            callback(state)
-
-    return call_all
-
-
 @contextlib.contextmanager
-def _progress(steps: int) -> Iterator[Callable[[State], None] | None]:
+def _progress(steps: int) -> Iterator[Callable[[int], None] | None]:
     """A progress callback: a bar on a terminal's stderr, nothing otherwise."""
     if not sys.stderr.isatty():
         yield None
         return
     with click.progressbar(length=max(1, steps), label="simulating", file=sys.stderr) as bar:
-        yield lambda state: bar.update(1)
+        yield bar.update

@@ -157,9 +157,9 @@ def _run(
     total = max(plan.duration or 0.0, _timeline_length(plan))
     with _progress(round(total / model.options.h)) as tick:
         if replay is not None:
-            runner = replay.runner(model, on_step=tick)
+            runner = replay.runner(model, progress=tick)
         else:
-            runner = Runner(model, plan, on_step=tick)
+            runner = Runner(model, plan, progress=tick)
         if no_trace:
             return runner.run()
         path, spidar = outdir / "trace.mcap", replay is not None
@@ -175,7 +175,7 @@ def _progress(steps: int):
         yield None
         return
     with click.progressbar(length=max(1, steps), label="simulating", file=sys.stderr) as bar:
-        yield lambda state: bar.update(1)
+        yield bar.update
 
 
 def _timeline_length(plan) -> float:

@@ -36,12 +36,12 @@ from puppetcli.script import DEFAULT_LOWPASS, DEFAULT_MAX_FORCE, DEFAULT_MAX_TOR
 from puppetcli.script_actions import GRIP_DEFAULTS
 from puppetcli.session import TICK, Event, Session, SessionWriter, Workspace
 from puppetcli.spidar import DevicePreset, TensionDistributor
+from puppetcli.warmup import compile_engine
 from solver import quat
-from solver.compiled.fast import fast_step
 from solver.model import Model, build_model
 from solver.rows.grip import nearest_point
 from solver.spec import RigSpec
-from solver.state import StepInput, StepReport, initial_state
+from solver.state import StepInput, StepReport
 
 __all__ = ["Grip", "Key", "LiveRecording", "Release", "Touch", "Undo", "live_settings"]
 
@@ -240,7 +240,7 @@ class LiveRecording:
     def warm_up(self) -> None:
         """Run the compiled parts once on throwaway inputs (the step, the tension programme):
         numba compiles or loads them now rather than in the first live step."""
-        fast_step(self.model, initial_state(self.model), StepInput())
+        compile_engine(self.model)
         TensionDistributor(self.runner.distributor.preset).display(
             np.zeros(3), quat.IDENTITY, np.zeros(3), np.zeros(3)
         )

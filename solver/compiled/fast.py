@@ -1,8 +1,7 @@
 """The compiled step: ``fast_step`` is ``solver.pipeline.step`` in one numba call.
 
-    from solver.compiled.fast import fast_step, supports
-    step_fn = fast_step if supports(model, inp) else solver.pipeline.step
-    state, report = step_fn(model, state, inp)
+    fm = solver.compiled.pack.pack(model)      # solver.engine.Engine does this
+    state, report = fast_step(fm, state, inp)
 
 Same pipeline, rows, row order, warm start by row key, solvers (direct by an exact
 linear-time elimination over the joint tree, PGS by ``solver.solve.pgs``'s kernel), the same
@@ -30,14 +29,13 @@ import numpy as np
 
 from solver.advance.substep import run_substeps
 from solver.compiled.entry import fast_kernel
-from solver.compiled.pack import FastModel, fast_model
-from solver.model import Model
+from solver.compiled.pack import FastModel
 from solver.pipeline import step
 from solver.rows.grip_kernel import MODE_GRIP, MODE_NONE, MODE_TOUCH
 from solver.solve.dispatch_kernel import SUBSTEP
 from solver.state import State, StepInput, StepReport
 
-__all__ = ["fast_model", "fast_step", "supports"]
+__all__ = ["fast_step", "supports"]
 
 SOLVER_NAMES = ("direct", "pgs", "hybrid")
 _F8, _I8, _B1 = np.dtype(np.float64), np.dtype(np.int64), np.dtype(np.bool_)
@@ -45,9 +43,10 @@ _NO_VEC = np.zeros(16)  # the pointer / coupling argument when there is none (ne
 _NO_INPUT = StepInput()  # frozen: one for every step without input
 
 
-def supports(model: Model, inp: StepInput | None = None) -> bool:
-    """True when ``fast_step`` compiles this model's steps (any StepInput is accepted)."""
-    return fast_model(model).reason is None
+def supports(fm: FastModel) -> bool:
+    """True when ``fast_step`` compiles the steps of ``fm``'s model (any StepInput is
+    accepted)."""
+    return fm.reason is None
 
 
 def _arr(x, dtype: np.dtype, shape: tuple) -> np.ndarray | None:
@@ -161,10 +160,13 @@ def new_state_arrays(nb: int, nj: int) -> tuple:
             e((nj, 4)), e(nj), e((nj, 3)), e(nb, _B1), e(nb))  # fmt: skip
 
 
-def fast_step(model: Model, state: State, inp: StepInput | None = None) -> tuple[State, StepReport]:
-    """Advance one step of size model.options.h, exactly as ``solver.pipeline.step``."""
+def fast_step(
+    fm: FastModel, state: State, inp: StepInput | None = None
+) -> tuple[State, StepReport]:
+    """Advance one step of size h of ``fm``'s model (``solver.compiled.pack.pack``),
+    exactly as ``solver.pipeline.step``."""
     inp = inp or _NO_INPUT
-    fm = fast_model(model)
+    model = fm.model
     if fm.reason is not None:
         return step(model, state, inp)
     try:
@@ -177,7 +179,9 @@ def fast_step(model: Model, state: State, inp: StepInput | None = None) -> tuple
     out, rep_f = new_state_arrays(len(prev[0]), len(prev[4])), np.empty(10)
     status, warm_key, warm_lam = _KERNEL[0](fm.flat, prev, keys, lam, ins, out, fm.rep_i, rep_f)
     if status == SUBSTEP:
-        return run_substeps(model, state, inp, int(fm.rep_i[0]), fast_step)
+        n = int(fm.rep_i[0])
+        sub = fm.sub(n)
+        return run_substeps(model, state, inp, n, lambda _m, s, part: fast_step(sub, s, part))
     if status:
         return step(model, state, inp)
     time, steps = state.time + model.options.h, state.step + 1

@@ -1,11 +1,10 @@
 """A Model packed once for the compiled step: arrays, the elimination forest, workspaces.
 
-``fast_model(model)`` builds (and caches by identity, for the model's lifetime) a
-``FastModel``: struct-of-arrays tuples with fixed layouts the kernels index by
-position, the options as two small arrays, and preallocated row/contact workspaces
-sized for the worst case (6 rows per joint, 3 limit rows per joint, 3 rows per
-possible contact, and the grip's 6).  The workspaces make a FastModel usable by one
-thread at a time.
+``pack(model)`` builds a ``FastModel`` (solver.engine.Engine holds it): struct-of-arrays
+tuples with fixed layouts the kernels index by position, the options as two small
+arrays, and preallocated row/contact workspaces sized for the worst case (6 rows per
+joint, 3 limit rows per joint, 3 rows per possible contact, and the grip's 6). The
+workspaces make a FastModel usable by one thread at a time.
 
 Every array of those tuples is a view into three buffers, ``flat`` (solver.compiled.flat):
 the compiled step is passed the buffers and rebuilds the tuples itself, which saves
@@ -42,10 +41,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from solver.advance.sleep import body_islands
-from solver.advance.substep import model_levers
+from solver.advance.substep import model_levers, sub_model
 from solver.compiled.clock import STAGES
 from solver.compiled.flat import flatten
-from solver.model import Model, kept_with
+from solver.model import Model
 from solver.rows.joints_kernel import limit_thresholds
 
 METHODS = {"auto": 0, "pgs": 1, "direct": 2, "hybrid": 3}
@@ -76,6 +75,7 @@ class FastModel:
     flat: tuple
     zeros: np.ndarray
     reason: str | None
+    model: Model
     pvec: np.ndarray = field(default_factory=lambda: np.zeros(14))
     ivec: np.ndarray = field(default_factory=lambda: np.zeros(5, np.int64))
     rep_i: np.ndarray = field(default_factory=lambda: np.zeros(4, np.int64))
@@ -83,18 +83,19 @@ class FastModel:
     last: tuple = (None, None)  # (State fast_step returned last, its kernel arrays)
     coupling: tuple = (None, None, None)  # (Coupling packed last, its array, its flags)
     pointer: tuple = ()
+    subs: dict = field(default_factory=dict)  # n → the FastModel of the step at h/n
 
     def __post_init__(self) -> None:
         p = self.pvec
         self.pointer = (p[0:3], p[3:7], p[7:10], p[10:13])
 
-
-_CACHE: dict[int, FastModel] = {}
-
-
-def fast_model(model: Model) -> FastModel:
-    """The packed form of ``model``, built on first use and dropped with the model."""
-    return kept_with(model, _CACHE, lambda: pack(model))
+    def sub(self, n: int) -> FastModel:
+        """The packed model of this model's step at h/n (solver.advance.substep),
+        packed the first time a step needs it and kept with this one."""
+        got = self.subs.get(n)
+        if got is None:
+            got = self.subs[n] = pack(sub_model(self.model, n))
+        return got
 
 
 def _c(x, dtype=float) -> np.ndarray:
@@ -202,7 +203,7 @@ def pack(model: Model) -> FastModel:
         np.zeros(3 * nj),
     )
     flat, views = flatten((m, g, tree, ptree, ws, pws, opt, iopt))
-    return FastModel(*views, flat, np.zeros((nb, 3)), reason)
+    return FastModel(*views, flat, np.zeros((nb, 3)), reason, model)
 
 
 def _rows(n: int) -> tuple:

@@ -30,8 +30,8 @@ from solver.compiled.entry import SIM_SCHEMA, inplace_kernel
 from solver.compiled.fast import _NO_INPUT, _input_arrays, entry_point, fast_step, kernel_report
 from solver.compiled.flat import flatten
 from solver.compiled.kernel import step_arrays
-from solver.compiled.pack import fast_model
-from solver.model import Model
+from solver.compiled.pack import FastModel
+from solver.rows.grip import follow_steps, path_input
 from solver.solve.dispatch_kernel import OK
 from solver.state import State, StepInput, StepReport, initial_state
 
@@ -52,9 +52,11 @@ class Sim:
     since it must not overwrite what it still reads and a step handed back to fast_step
     must find the old state intact), the warm keys and λ, the report."""
 
-    def __init__(self, model: Model, state: State | None = None) -> None:
-        self.model = model
-        self._fm = fm = fast_model(model)
+    def __init__(self, fm: FastModel, state: State | None = None) -> None:
+        """A stepper of ``fm``'s model (solver.compiled.pack.pack) from ``state`` (rest
+        when None)."""
+        self.model = model = fm.model
+        self._fm = fm
         rest, nb, rows = initial_state(model), len(fm.zeros), len(fm.ws[0][0])
         sets = tuple(tuple(np.zeros_like(_field(rest, f, nb)) for f in _FIELDS) for _ in range(2))
         warm = (np.zeros(rows, np.int64), np.zeros(rows), np.zeros(1, np.int64))
@@ -93,6 +95,32 @@ class Sim:
             warm_lam=self._warm[1][:n].copy(), **arrays,
         )  # fmt: skip
 
+    def view(self) -> State:
+        """The current state over this stepper's own arrays, not copied: for reading
+        before the next step (which overwrites them); ``state`` is the copy to keep."""
+        n = int(self._warm[2][0])
+        arrays = dict(zip(_FIELDS, self._sets[self._phase], strict=True))
+        return State(
+            time=self.time, step=self.steps, warm_key=self._warm[0][:n],
+            warm_lam=self._warm[1][:n], **arrays,
+        )  # fmt: skip
+
+    def wrench(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The last step's (grip force, grip torque, touch force) (3,) each, as in its
+        report, without making the report (views: read them before the next step)."""
+        if self._handed_back is not None:
+            r = self._handed_back
+            return r.grip_force, r.grip_torque, r.touch_force
+        f = self._rep_f
+        return f[1:4], f[4:7], f[7:10]
+
+    def wrench_into(self, out: np.ndarray) -> None:
+        """Write the last step's (grip force, grip torque, touch force) into out (9,)."""
+        if self._handed_back is None:
+            out[:] = self._rep_f[1:10]
+        else:
+            out[:] = np.concatenate(self.wrench())
+
     def step(self, inp: StepInput | None = None) -> StepReport:
         """Advance one step of size model.options.h, exactly as ``fast_step``; its report."""
         self.advance(inp)
@@ -104,15 +132,47 @@ class Sim:
         inp = inp or _NO_INPUT
         fm = self._fm
         ins = _input_arrays(fm, inp) if fm.reason is None else None
-        if ins is not None:
-            status, _ = _KERNEL[0](self._flat, self._phase, ins)
-            if status == OK:
-                self._phase ^= 1
-                self.time += self.model.options.h
-                self.steps += 1
-                self._handed_back = None
-                return
-        new, report = fast_step(self.model, self.state, inp)
+        if ins is not None and _KERNEL[0](self._flat, self._phase, ins)[0] == OK:
+            self._stepped()
+        else:
+            self._hand_back(inp)
+
+    def follow(self, path: tuple, radius: float, coupling, wrench: np.ndarray) -> None:
+        """len(wrench) steps of the pointer along ``path`` without loads: exactly the
+        ``advance`` of each ``path_input(path, k, radius, coupling)``, with each step's
+        (grip force, grip torque, touch force) written to wrench[k] (n, 9).  Only the
+        pointer's pose changes from step to step, so its arrays are rewritten in place
+        and nothing else is made: a rollout's loop without a step's Python around it."""
+        fm, n = self._fm, len(wrench)
+        ins = (
+            _input_arrays(fm, path_input(path, 0, radius, coupling))
+            if n and fm.reason is None
+            else None
+        )
+        if ins is None:
+            return follow_steps(self, path, radius, coupling, wrench)
+        kernel, flat, rep, pvec = _KERNEL[0], self._flat, self._rep_f, fm.pvec[:13]
+        poses = np.concatenate(path, axis=1)  # each row as the kernel's pointer vector
+        for k in range(n):
+            pvec[:] = poses[k]
+            if kernel(flat, self._phase, ins)[0] == OK:
+                self._stepped()
+                wrench[k] = rep[1:10]
+            else:
+                self._hand_back(path_input(path, k, radius, coupling))
+                self.wrench_into(wrench[k])
+
+    def _stepped(self) -> None:
+        """The kernel stepped in place: the other state set is now the current one."""
+        self._phase ^= 1
+        self.time += self.model.options.h
+        self.steps += 1
+        self._handed_back = None
+
+    def _hand_back(self, inp: StepInput) -> None:
+        """A step the kernel did not take in place, taken by fast_step (substeps, a
+        monitor failure: its error), then loaded."""
+        new, report = fast_step(self._fm, self.state, inp)
         self.load(new)
         self._handed_back = report
 

@@ -34,7 +34,7 @@ from solver.model import Model
 from solver.observe import bone_heads, bone_tails
 from solver.rows.compliance import voigt_row
 from solver.rows.table import KIND_GRIP, Rows, angular_jacobians, concat, make_rows, point_jacobians
-from solver.state import State
+from solver.state import State, StepInput
 
 
 @dataclass(frozen=True)
@@ -161,3 +161,18 @@ def bone_reach(model: Model) -> np.ndarray:
     )
     np.maximum.at(reach, g.shape_body[sel], size)
     return reach
+
+
+def path_input(path: tuple, k: int, radius: float, coupling: Coupling | None) -> StepInput:
+    """The input of step k along a pointer path (pos (n,3), quat (n,4): the pointer at
+    each step's end; vel (n,3), omega (n,3): its mean velocities over each step), no loads."""
+    pos, q, vel, omega = path
+    return StepInput(None, None, Pointer(pos[k], q[k], vel[k], omega[k], radius), coupling)
+
+
+def follow_steps(stepper, path: tuple, radius: float, coupling, wrench: np.ndarray) -> None:
+    """A stepper's ``follow`` step by step: advance along ``path`` (``path_input``), each
+    step's (grip force, grip torque, touch force) into wrench[k] (n, 9)."""
+    for k in range(len(wrench)):
+        stepper.advance(path_input(path, k, radius, coupling))
+        stepper.wrench_into(wrench[k])

@@ -9,6 +9,7 @@ import pytest
 from click.testing import CliRunner
 
 from puppetcli.cli import cli
+from puppetcli.haptics import HapticChain
 from puppetcli.rigfile import load_rig
 from puppetcli.runner import Runner, script_model
 from puppetcli.script import script_from_text
@@ -38,12 +39,13 @@ def runner_for(script: str) -> Runner:
 def test_coupling_force_is_the_backward_euler_spring_damper():
     # λ = −K (e[t+1]) − D (v[t+1] − u): recomputed from the state after each step.
     runner = runner_for(PULL.format(settings="", k=2000, d=40, t=1.0))
+    runner.batch_steps = False  # every step through _after_step, to see each one
     seen = []
     original = runner._after_step
 
-    def spy(inp, report):
-        seen.append((inp, report, runner.state))
-        original(inp, report)
+    def spy(inp):
+        seen.append((inp, runner.sim.report, runner.state))
+        original(inp)
 
     runner._after_step = spy
     runner.run()
@@ -108,3 +110,17 @@ def test_a_one_metre_jump_of_the_pointer_in_one_step_does_not_explode():
     assert result.error is None
     assert result.peak_force <= np.sqrt(3) * 300.0 + 1e-6  # the per-axis force limit holds
     assert max(speeds) < 10.0
+
+
+def test_haptic_chain_over_many_steps_is_the_chain_step_by_step():
+    # display_many (a batch's wrenches) against display called row by row: the same floats.
+    rng = np.random.default_rng(3)
+    requested = rng.normal(scale=15.0, size=(400, 6))
+    for lowpass in (0.0, 0.6, 0.95):
+        one, many = HapticChain(20.0, 2.0, lowpass), HapticChain(20.0, 2.0, lowpass)
+        rows = [np.concatenate(one.display(r[:3], r[3:])) for r in requested]
+        shown = many.display_many(requested[:150])
+        shown = np.vstack((shown, many.display_many(requested[150:])))
+        assert np.array_equal(np.array(rows), shown)
+        assert one.filtered == many.filtered
+        assert (np.linalg.norm(shown[:, :3], axis=1) <= 20.0 + 1e-12).all()

@@ -17,12 +17,14 @@ import numpy as np
 import pytest
 from paper_experiment import DD, DF, INERTIA, KF, T_END, T_LOAD, TAU, recursion
 from rigbuild import chain, one_bone, rheology
-from solver.fast.bench import scene_inputs
 
+from puppetcli.bench_solver import scene_inputs
 from puppetcli.rigfile import load_rig
 from solver import quat
 from solver.advance.stabilize import project_joints
-from solver.compiled.fast import fast_step, supports
+from solver.compiled.fast import supports
+from solver.compiled.pack import pack
+from solver.engine import Engine
 from solver.errors import SimulationError
 from solver.model import build_model
 from solver.observe import bone_points, joint_gaps, joint_rotations
@@ -50,11 +52,12 @@ def close(a, b, scale: bool = False) -> bool:
 
 def lockstep(model, state, inputs):
     """Run both steps; assert agreement after every step; return the compiled reports."""
+    engine = Engine(model)
     a = b = state
     reports = []
     for k, inp in enumerate(inputs):
         a, ra = step(model, a, inp)
-        b, rb = fast_step(model, b, inp)
+        b, rb = engine.step(b, inp)
         where = f"step {k}"
         assert (ra.rows, ra.contacts, ra.iterations, ra.solver, ra.substeps) == (
             rb.rows,
@@ -88,11 +91,12 @@ def test_creep_rig_matches_the_numpy_step():
 @pytest.mark.parametrize("h", [0.02, 0.005])
 def test_fast_step_reproduces_the_exact_discrete_recursion(h):
     model = build_model(one_bone(h, KF, DF, DD, INERTIA))
+    engine = Engine(model)
     state = initial_state(model)
     loaded = StepInput(body_torque=np.array([[0.0, 0.0, TAU]]))
     angles = []
     for k in range(round(T_END / h)):
-        state, _ = fast_step(model, state, loaded if k < round(T_LOAD / h) else None)
+        state, _ = engine.step(state, loaded if k < round(T_LOAD / h) else None)
         angles.append(joint_rotations(model, state)[0, 2])
     assert np.max(np.abs(np.array(angles) - recursion(h))) < 1e-9
 
@@ -163,7 +167,7 @@ def test_tumbling_chain_with_joint_projection_matches(monkeypatch):
 
 
 def doll_inputs(model, steps: int) -> tuple:
-    """Push + grip for the first half (solver.fast.bench's scene), then a free-mode
+    """Push + grip for the first half (puppetcli.bench_solver's scene), then a free-mode
     pointer sphere pressing down on the left forearm."""
     state, inputs = scene_inputs(model, steps // 2)
     b = model.bone_names.index("forearm_l")
@@ -182,7 +186,7 @@ def doll_inputs(model, steps: int) -> tuple:
 @pytest.mark.parametrize("method", ["auto", "pgs"])
 def test_doll_with_contacts_push_grip_and_touch_matches(method):
     model = build_model(load_rig(DOLL)).with_options(h=0.001, method=method)
-    assert supports(model)
+    assert supports(pack(model))
     state, inputs = doll_inputs(model, 500)
     reports = lockstep(model, state, inputs)
     assert {r.solver for r in reports} == {"hybrid" if method == "auto" else "pgs"}
@@ -225,6 +229,7 @@ def test_substepped_rope_matches():
 
 def test_monitor_failures_raise_the_numpy_steps_error():
     model = build_model(chain(3, 0.01)).with_options(max_speed=0.2)
+    engine = Engine(model)
     state = initial_state(model)
     with pytest.raises(SimulationError) as expected:
         for _ in range(100):
@@ -232,7 +237,7 @@ def test_monitor_failures_raise_the_numpy_steps_error():
     state = initial_state(model)
     with pytest.raises(SimulationError) as got:
         for _ in range(100):
-            state, _ = fast_step(model, state)
+            state, _ = engine.step(state)
     assert str(got.value) == str(expected.value)
     assert (got.value.step, got.value.bone) == (expected.value.step, expected.value.bone)
 
@@ -240,6 +245,7 @@ def test_monitor_failures_raise_the_numpy_steps_error():
 def test_forced_direct_solver_on_contacts_raises_the_numpy_steps_error():
     spec = chain(3, 0.01, collide=True, ground=0.99, method="direct")
     model = build_model(spec)
+    engine = Engine(model)
     with pytest.raises(SimulationError) as expected:
         state = initial_state(model)
         for _ in range(50):
@@ -247,7 +253,7 @@ def test_forced_direct_solver_on_contacts_raises_the_numpy_steps_error():
     with pytest.raises(SimulationError) as got:
         state = initial_state(model)
         for _ in range(50):
-            state, _ = fast_step(model, state)
+            state, _ = engine.step(state)
     assert str(got.value) == str(expected.value)
 
 
@@ -270,11 +276,11 @@ def box_chain() -> RigSpec:
 def test_supports_declines_what_is_not_compiled_and_numpy_still_runs():
     reference = build_model(chain(3, 0.01)).with_options(method="reference")
     boxes = build_model(box_chain())
-    assert not supports(reference)
-    assert not supports(boxes)
-    assert supports(build_model(chain(3, 0.01)))
+    assert not supports(pack(reference))
+    assert not supports(pack(boxes))
+    assert supports(pack(build_model(chain(3, 0.01))))
     for model in (reference, boxes):
         state = initial_state(model)
         a, ra = step(model, state)
-        b, rb = fast_step(model, state)  # delegates to the numpy step
+        b, rb = Engine(model).step(state)  # delegates to the numpy step
         assert np.array_equal(a.body_pos, b.body_pos) and ra.solver == rb.solver

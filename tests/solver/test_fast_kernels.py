@@ -21,7 +21,7 @@ from solver.collide.pointer_kernel import collide_pointer
 from solver.collide.scene_kernel import collide_scene, world_shapes
 from solver.collide.segment_kernel import segment_segment
 from solver.compiled.flat import unflatten
-from solver.compiled.pack import fast_model, pack
+from solver.compiled.pack import pack
 from solver.model import build_model
 from solver.rows.build import build_rows
 from solver.rows.joints import joint_frames
@@ -328,7 +328,7 @@ def test_limit_rows_at_their_margins_equal_numpys(limits):
     # (an infinite bound is never reached); the compiled rows (thresholds, one angle
     # per joint) must be numpy's (every angle).
     model = build_model(chain(9, 0.001, root_mode="free", limits=limits))
-    fm, margin, rng = fast_model(model), model.options.limit_margin, np.random.default_rng(7)
+    fm, margin, rng = pack(model), model.options.limit_margin, np.random.default_rng(7)
     lo, hi = limits.twist
     twist_edges = [b for b in (lo + margin, hi - margin) if np.isfinite(b)] or [0.0]
     swing_edge = limits.swing - margin if np.isfinite(limits.swing) else 1.0

@@ -24,8 +24,9 @@ from rigbuild import chain
 from test_fast import box_chain, doll_inputs, lying_chain
 
 from puppetcli.rigfile import load_rig
-from solver.compiled.fast import fast_step
+from solver.compiled.pack import pack
 from solver.compiled.sim import Sim
+from solver.engine import Engine
 from solver.model import build_model
 from solver.state import initial_state
 
@@ -76,11 +77,12 @@ def _counts() -> tuple[int, int]:
 
 
 def _run(model, state, inputs) -> None:
-    sim = Sim(model, state)
+    engine = Engine(model)
+    sim = Sim(pack(model), state)
     for inp in inputs:
         sim.advance(inp)
     for inp in inputs:
-        state, _ = fast_step(model, state, inp)
+        state, _ = engine.step(state, inp)
 
 
 @pytest.mark.parametrize("name", sorted(SCENES))

@@ -62,4 +62,3 @@ def test_an_array_of_another_kind_is_refused():
     with pytest.raises(TypeError, match=r"\[0\]\[4\]: expected f3"):
         flatten(tuple(parts))
     assert len(SCHEMA) == len(PARTS)
-

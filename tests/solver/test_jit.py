@@ -49,6 +49,7 @@ def test_fingerprint_follows_every_covered_source(tmp_path, monkeypatch):
 
     import solver.jit as jit
 
+    fingerprint.cache_clear()
     real = fingerprint()
     copy = tmp_path / "solver"
     shutil.copytree(ROOT, copy, ignore=shutil.ignore_patterns("__pycache__"))

@@ -14,8 +14,9 @@ from test_fast import box_chain, doll_inputs
 
 from puppetcli.bench import doll_scenes
 from puppetcli.rigfile import load_rig
-from solver.compiled.fast import fast_step
+from solver.compiled.pack import pack
 from solver.compiled.sim import Sim
+from solver.engine import Engine
 from solver.errors import SimulationError
 from solver.model import build_model
 from solver.state import StepInput, initial_state
@@ -36,9 +37,10 @@ def same(a, b) -> bool:
 def lockstep(model, state, inputs) -> list:
     """Sim against fast_step, by ``step`` on even steps and ``advance`` on odd ones (its
     report and counts read afterwards)."""
-    sim, ref, reports = Sim(model, state), state, []
+    engine = Engine(model)
+    sim, ref, reports = Sim(pack(model), state), state, []
     for k, inp in enumerate(inputs):
-        ref, expected = fast_step(model, ref, inp)
+        ref, expected = engine.step(ref, inp)
         if k % 2:
             sim.advance(inp)
             got = sim.report
@@ -69,10 +71,11 @@ def test_substeps_and_numpy_fallbacks_are_identical():
 
 def test_a_broken_simulation_raises_the_same_error():
     model = build_model(chain(3, 0.01)).with_options(max_speed=0.2)
-    sim, state = Sim(model), initial_state(model)
+    engine = Engine(model)
+    sim, state = Sim(pack(model)), initial_state(model)
     with pytest.raises(SimulationError) as expected:
         for _ in range(100):
-            state, _ = fast_step(model, state)
+            state, _ = engine.step(state)
     with pytest.raises(SimulationError) as got:
         for _ in range(100):
             sim.step()
@@ -82,11 +85,11 @@ def test_a_broken_simulation_raises_the_same_error():
 def test_a_state_of_another_model_is_refused():
     small, large = build_model(chain(3, 0.01)), build_model(chain(5, 0.01))
     with pytest.raises(ValueError, match="not a state of this model"):
-        Sim(small, initial_state(large))
+        Sim(pack(small), initial_state(large))
     rest = initial_state(small)
     flat = replace(rest, body_vel=rest.body_vel[:, :1].copy())  # (nb, 1) would broadcast
     with pytest.raises(ValueError, match="not a state of this model"):
-        Sim(small, flat)
+        Sim(pack(small), flat)
 
 
 def test_two_sims_of_one_model_step_independently():
@@ -98,12 +101,12 @@ def test_two_sims_of_one_model_step_independently():
         force = np.zeros((model.nbody, 3))
         force[-1] = (3.0 * (k + 1), 0.0, -2.0 * k)
         pushes.append(StepInput(body_force=force))
-    together = [Sim(model), Sim(model)]
+    together = [Sim(pack(model)), Sim(pack(model))]
     for _ in range(50):
         for sim, push in zip(together, pushes, strict=True):
             sim.advance(push)
     for sim, push in zip(together, pushes, strict=True):
-        alone = Sim(model)
+        alone = Sim(pack(model))
         for _ in range(50):
             alone.advance(push)
         assert same(sim.state, alone.state)
@@ -116,9 +119,10 @@ def test_a_doll_woken_by_a_push_falls_asleep_again_identically():
     # the next, or a woken island would never fall asleep again.  The doll falls asleep
     # (3 s alone), one step's push wakes the right leg, which then settles and sleeps.
     model = doll_scenes()["doll"].with_options(h=0.005)
+    engine = Engine(model)
     state = initial_state(model)
     for _ in range(600):
-        state, _ = fast_step(model, state)
+        state, _ = engine.step(state)
     assert state.body_asleep[1:].all()  # (the hips, clamped, never sleep: solver.advance.sleep)
     force = np.zeros((model.nbody, 3))
     force[model.body_names.index("shin_r")] = [5.0, 0.0, 0.0]
@@ -126,6 +130,6 @@ def test_a_doll_woken_by_a_push_falls_asleep_again_identically():
     lockstep(model, state, inputs)
     awake_after = []
     for inp in inputs:
-        state, _ = fast_step(model, state, inp)
+        state, _ = engine.step(state, inp)
         awake_after.append(not state.body_asleep[1:].all())
     assert awake_after[0] and not awake_after[-1]  # woken, then asleep again

@@ -11,18 +11,20 @@ import pytest
 from test_fast import doll_inputs
 
 from puppetcli.rigfile import load_rig
-from solver.compiled.fast import fast_step
+from solver.engine import Engine
 from solver.model import build_model
-from solver.pipeline import step
 from solver.state import initial_state
 
 DOLL = Path(__file__).resolve().parents[2] / "rigs" / "doll.yaml"
 
 
-def run(step_fn, model, state, inputs):
+def run(engine, model, state, inputs):
+    """The states and reports of ``model`` stepped through ``inputs`` on ``engine``
+    ("compiled" or "numpy": Options.engine)."""
+    stepper = Engine(model.with_options(engine=engine))
     states, reports = [], []
     for inp in inputs:
-        state, report = step_fn(model, state, inp)
+        state, report = stepper.step(state, inp)
         states.append(state)
         reports.append(report)
     return states, reports
@@ -36,16 +38,16 @@ def largest_difference(a, b) -> float:
 
 
 @pytest.mark.parametrize("skip", ["cull_pairs", "dormant_rows"])
-@pytest.mark.parametrize("step_fn", [fast_step, step], ids=["fast", "numpy"])
-def test_skipping_changes_nothing_on_the_doll(skip, step_fn):
+@pytest.mark.parametrize("engine", ["compiled", "numpy"])
+def test_skipping_changes_nothing_on_the_doll(skip, engine):
     # The doll with ground contacts, a push and a grip, then a free-mode pointer pressing
     # the forearm: pairs far apart would find no contact in the narrow phase, and dormant
     # rows stay at λ = 0 in the unskipped iteration too.
-    steps = 300 if step_fn is fast_step else 60
+    steps = 300 if engine == "compiled" else 60
     model = build_model(load_rig(DOLL)).with_options(h=0.001)
     state, inputs = doll_inputs(model, steps)
-    on, rep_on = run(step_fn, model, state, inputs)
-    off, rep_off = run(step_fn, model.with_options(**{skip: False}), state, inputs)
+    on, rep_on = run(engine, model, state, inputs)
+    off, rep_off = run(engine, model.with_options(**{skip: False}), state, inputs)
     assert largest_difference(on, off) <= 1e-12
     assert [r.contacts for r in rep_on] == [r.contacts for r in rep_off]
     assert max(r.contacts for r in rep_on) > 0
@@ -57,8 +59,8 @@ def test_dormant_rows_are_really_left_out_and_checked():
     model = build_model(load_rig(DOLL)).with_options(h=0.001)
     state = initial_state(model)
     inputs = [None] * 50
-    _, on = run(fast_step, model, state, inputs)
-    _, off = run(fast_step, model.with_options(dormant_rows=False), state, inputs)
+    _, on = run("compiled", model, state, inputs)
+    _, off = run("compiled", model.with_options(dormant_rows=False), state, inputs)
     assert min(r.contacts for r in on) > 0
     assert sum(r.iterations for r in on) < sum(r.iterations for r in off)
 
@@ -75,9 +77,9 @@ def test_direct_solve_agrees_with_converged_pgs_on_two_sided_rows():
     model = build_model(bare).with_options(h=0.001)
     state, inputs = doll_inputs(model, 200)
     inputs = inputs[:100]
-    exact, reports = run(fast_step, model, state, inputs)
+    exact, reports = run("compiled", model, state, inputs)
     assert {r.solver for r in reports} == {"direct"}
-    pgs, _ = run(fast_step, model.with_options(method="pgs", iterations=300), state, inputs)
+    pgs, _ = run("compiled", model.with_options(method="pgs", iterations=300), state, inputs)
     assert largest_difference(exact, pgs) < 1e-6
-    pgs15, _ = run(fast_step, model.with_options(method="pgs", iterations=15), state, inputs)
+    pgs15, _ = run("compiled", model.with_options(method="pgs", iterations=15), state, inputs)
     assert largest_difference(exact, pgs15) > largest_difference(exact, pgs)

@@ -13,7 +13,7 @@ from rigbuild import chain
 from puppetcli import stress
 from solver import quat
 from solver.advance.substep import SAFE_RATE, model_substeps, pointer_at, run_substeps
-from solver.compiled.fast import fast_step
+from solver.engine import Engine
 from solver.model import build_model
 from solver.pipeline import step
 from solver.rows.grip import Pointer
@@ -144,8 +144,9 @@ def test_the_rope_needs_substeps_and_is_stable_with_them():
     res = stress.run_scene(scene)
     assert res.stable, res.problems
     model, state, counts = scene.model, scene.start, []
+    engine = Engine(model)
     for _ in range(round(scene.duration / model.options.h)):
-        state, report = fast_step(model, state)
+        state, report = engine.step(state)
         counts.append(report.substeps)
     assert max(counts) >= 2 and counts[0] == 1
     assert math.isclose(state.time, scene.duration, rel_tol=1e-12)

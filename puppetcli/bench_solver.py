@@ -19,11 +19,9 @@ import numpy as np
 from solver import quat
 from solver.advance.integrate import free_velocity
 from solver.compiled.clock import STAGES, counter_read_seconds, seconds_per_cycle
-from solver.compiled.fast import fast_step
-from solver.compiled.pack import fast_model
+from solver.engine import Engine
 from solver.model import Model
 from solver.observe import bone_points
-from solver.pipeline import step
 from solver.rows.build import build_rows
 from solver.rows.grip import Pointer, make_coupling
 from solver.rows.table_kernel import row_arrays
@@ -67,7 +65,7 @@ def scene_inputs(model: Model, steps: int) -> tuple[State, list[StepInput]]:
     coupling = make_coupling(state, still, b, start, **GAINS)
     pushed = model.bone_names.index(PUSH_BONE)
     local = model.bone_head0[pushed] - model.body_pos0[pushed] + np.array(PUSH_POINT)
-    inputs, s = [], state
+    inputs, s, engine = [], state, Engine(model)
     for _ in range(steps):
         frac = min((s.time + h) / LIFT_TIME, 1.0)
         moving = s.time + 0.5 * h < LIFT_TIME
@@ -79,15 +77,15 @@ def scene_inputs(model: Model, steps: int) -> tuple[State, list[StepInput]]:
             force[pushed] = PUSH_FORCE
             torque[pushed] = quat.cross(quat.rotate(s.body_quat[pushed], local), force[pushed])
         inputs.append(StepInput(force, torque, ptr, coupling))
-        s, _ = fast_step(model, s, inputs[-1])
+        s, _ = engine.step(s, inputs[-1])
     return state, inputs
 
 
-def _run(fn, model: Model, state: State, inputs: list[StepInput]) -> tuple[float, list]:
+def _run(engine: Engine, state: State, inputs: list[StepInput]) -> tuple[float, list]:
     reports = []
     start = time.perf_counter()
     for inp in inputs:
-        state, report = fn(model, state, inp)
+        state, report = engine.step(state, inp)
         reports.append(report)
     return time.perf_counter() - start, reports
 
@@ -96,9 +94,10 @@ def compare(model: Model, seconds: float = 0.5, repeats: int = 3) -> Timing:
     """Best-of-``repeats`` steps/s of solver.pipeline.step and fast_step over ``seconds``."""
     n = max(1, round(seconds / model.options.h))
     state, inputs = scene_inputs(model, n)
-    slow = min(_run(step, model, state, inputs)[0] for _ in range(repeats))
+    numpy, compiled = Engine(model.with_options(engine="numpy")), Engine(model)
+    slow = min(_run(numpy, state, inputs)[0] for _ in range(repeats))
     fast, reports = min(
-        (_run(fast_step, model, state, inputs) for _ in range(repeats)), key=lambda run: run[0]
+        (_run(compiled, state, inputs) for _ in range(repeats)), key=lambda run: run[0]
     )
     solvers: dict[str, int] = {}
     for r in reports:
@@ -118,7 +117,7 @@ def first_call_seconds(model: Model) -> float:
     """Wall time of one compiled step; in a fresh process this is the compile or the
     cache load."""
     start = time.perf_counter()
-    fast_step(model, initial_state(model))
+    Engine(model).step(initial_state(model))
     return time.perf_counter() - start
 
 
@@ -135,7 +134,7 @@ def direct_solvers(model: Model, calls: int = 2000) -> dict[str, float]:
     if not rows.bilateral:
         raise ValueError("the direct solvers need a table of two-sided rows only")
     rw = row_arrays(rows)
-    order, parent, rheo_start, _, _, node_rows_, size, tw = fast_model(model).tree
+    order, parent, rheo_start, _, _, node_rows_, size, tw = Engine(model).packed.tree
     for i in order:
         size[i] = node_rows(i, model.nbody, rheo_start, node_rows_[i])
     inertia_w = rot @ model.body_inertia @ np.swapaxes(rot, 1, 2)
@@ -183,19 +182,20 @@ def stage_profile(
     taken off each stage once per step (twice for the collision stage, which spans two
     reads).  A profiled step still runs a few µs slower than an unprofiled one (~7 µs on
     the doll): the stages absorb that.  Each figure is the best of ``repeats`` runs."""
-    fm = fast_model(model)
+    engine = Engine(model)
+    fm = engine.packed
     prof = fm.ws[10]
-    fast_step(model, state, inputs[0])  # compiled and cached before the count starts
+    engine.step(state, inputs[0])  # compiled and cached before the count starts
     per_cycle, read = seconds_per_cycle(), counter_read_seconds()
     n = len(inputs)
     stages = {name: math.inf for name in STAGES}
     wall = math.inf
     for _ in range(repeats):
-        wall = min(wall, _run(fast_step, model, state, inputs)[0] / n * 1e6)
+        wall = min(wall, _run(engine, state, inputs)[0] / n * 1e6)
         prof[:] = 0
         fm.iopt[7] = 1
         try:
-            _run(fast_step, model, state, inputs)
+            _run(engine, state, inputs)
         finally:
             fm.iopt[7] = 0
         for k, name in enumerate(STAGES):
