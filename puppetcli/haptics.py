@@ -60,12 +60,11 @@ class HapticChain:
     def display_many(self, requested: np.ndarray) -> np.ndarray:
         """``display`` of each row of ``requested`` (n, 6: force, torque) in turn: the
         displayed (n, 6), the same floats as row by row, and the filter as after the last."""
-        a, filtered = self.lowpass, [self.filtered]
-        append = filtered.append
+        y, filtered = self.filtered, []
         for x in requested.tolist():
-            append(_low_pass(a, filtered[-1], x))
-        self.filtered = filtered[-1]
-        del filtered[0]
+            y = _low_pass(self.lowpass, y, x)
+            filtered.append(y)
+        self.filtered = y
         shown = np.array(filtered).reshape(-1, 6)
         clamp_rows(shown[:, :3], self.max_force)
         clamp_rows(shown[:, 3:], self.max_torque)

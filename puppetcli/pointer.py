@@ -38,17 +38,16 @@ class Motion:
 
     def pose(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """(position, quaternion) at time t."""
-        s = min_jerk((t - self.t0) / self.duration) if self.duration > 0.0 else 1.0
-        return self.pos0 + s * self.delta, quat.mul(quat.exp(s * self.rotvec), self.quat0)
+        pos, q = self.poses(np.array([t]))
+        return pos[0], q[0]
 
     def poses(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(positions (n,3), quaternions (n,4)) at each of ``times``: ``pose`` of each
-        (the same operations, element by element), in one pass."""
+        """(positions (n,3), quaternions (n,4)) at each of ``times``."""
         if self.duration > 0.0:
-            t = np.clip((times - self.t0) / self.duration, 0.0, 1.0)
-            s = (t * t * t * (10.0 + t * (-15.0 + 6.0 * t)))[:, None]
+            s = np.array([min_jerk((t - self.t0) / self.duration) for t in times.tolist()])
         else:
-            s = np.ones((len(times), 1))
+            s = np.ones(len(times))
+        s = s[:, None]
         return self.pos0 + s * self.delta, quat.mul(quat.exp(s * self.rotvec), self.quat0)
 
 
@@ -63,6 +62,17 @@ def pointer_over_step(motion: Motion, t: float, h: float, radius: float) -> Poin
     p1, q1 = motion.pose(t + h)
     turn = quat1.log(quat1.mul(tuple(q1.tolist()), quat1.conj(tuple(q0.tolist()))))
     return Pointer(p1, q1, (p1 - p0) / h, np.array(turn) / h, radius)
+
+
+def pointer_path(motion, times: np.ndarray, h: float) -> tuple[np.ndarray, tuple]:
+    """The pointer over the steps between consecutive ``times`` (t_k, t_k + h), all at
+    once: (position (n+1,3) at every time, the path (position (n,3) and quaternion (n,4)
+    at each step's end, mean velocity (n,3) and angular velocity (n,3) over it)).  The
+    path is ``pointer_over_step``'s values for each step, the same floats; ``motion``
+    is anything with ``poses(times)`` (a Motion, a recorded track)."""
+    pos, q = motion.poses(times)
+    turn = quat.log(quat.mul(q[1:], quat.conj(q[:-1])))
+    return pos, (pos[1:], q[1:], (pos[1:] - pos[:-1]) / h, turn / h)
 
 
 def device_from_world(pos: np.ndarray, offset: np.ndarray, scale: float) -> np.ndarray:

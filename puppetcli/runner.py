@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -29,7 +29,7 @@ from puppetcli.errors import ScriptError
 from puppetcli.expect import ExpectResult, check
 from puppetcli.haptics import HapticChain, norm3, row_norms
 from puppetcli.keyframes import KeyframeSet
-from puppetcli.pointer import Motion, still
+from puppetcli.pointer import Motion, pointer_path, still
 from puppetcli.runtrace import RunTrace
 from puppetcli.script import Key, Push, Script, Wait
 from puppetcli.script_actions import Expect, Grip, Move, Release, Rotate, Touch, Twist
@@ -45,6 +45,7 @@ from solver.rows.grip import (
     bone_reach,
     make_coupling,
     nearest_point,
+    path_input,
     segment_distances,
 )
 from solver.state import State, StepInput, initial_state
@@ -137,11 +138,6 @@ class Runner:
     def state(self) -> State:
         """The current state (a copy: read it between actions, not every step)."""
         return self.sim.state
-
-    @property
-    def time(self) -> float:
-        """The simulated time (s)."""
-        return self.sim.time
 
     def run(self, actions: tuple | None = None) -> RunResult:
         """Run every action (the script's unless given), then wait out the script's duration."""
@@ -285,7 +281,7 @@ class Runner:
             t += h
         if not starts:
             return
-        poses = self._poses(starts + [t]) if self.pointer_on else None
+        poses = pointer_path(self.motion, np.array(starts + [t]), h) if self.pointer_on else None
         for k in range(len(starts)):
             if self._batched(push):  # from here on, every input is known
                 self._run_batch(poses, k, len(starts))
@@ -293,15 +289,6 @@ class Runner:
             inp = self._input(push, poses, k)
             sim.advance(inp)
             self._after_step(inp)
-
-    def _poses(self, times: list[float]) -> tuple:
-        """The pointer over every step between ``times``: positions and quaternions at
-        each time (n+1), mean velocities and angular velocities over each step (n): the
-        motion's poses, all at once."""
-        h = self.model.options.h
-        pos, q = self.motion.poses(np.array(times))
-        turn = quat.log(quat.mul(q[1:], quat.conj(q[:-1])))
-        return pos, q, (pos[1:] - pos[:-1]) / h, turn / h
 
     def _batched(self, push: Push | None) -> bool:
         """True when every input of the steps is known before they run and nothing needs
@@ -317,13 +304,13 @@ class Runner:
         loads = push_input(self.model, self.sim.view(), push) if push is not None else None
         if poses is None:
             return loads or StepInput()
-        pos, q, vel, omega = poses
+        pos, path = poses
         free = self.coupling is None and self._touching(pos[k])
         radius = self.script.pointer_radius if free else 0.0
-        ptr = Pointer(pos[k + 1], q[k + 1], vel[k], omega[k], radius)
+        inp = path_input(path, k, radius, self.coupling)
         if loads is None:
-            return StepInput(None, None, ptr, self.coupling)
-        return StepInput(loads.body_force, loads.body_torque, ptr, self.coupling)
+            return inp
+        return replace(inp, body_force=loads.body_force, body_torque=loads.body_torque)
 
     def _run_batch(self, poses, first: int, end: int) -> None:
         """Steps first … end − 1 of ``poses``, whose inputs are all known: stepped with
@@ -336,15 +323,9 @@ class Runner:
                 self.sim.advance()
                 self.sim.wrench_into(row)
         else:
-            pos, q, vel, omega = poses
             free = self.coupling is None and self.touch_enabled
             radius = self.script.pointer_radius if free else 0.0
-            path = (
-                pos[first + 1 : end + 1],
-                q[first + 1 : end + 1],
-                vel[first:end],
-                omega[first:end],
-            )
+            path = tuple(a[first:end] for a in poses[1])
             self.sim.follow(path, radius, self.coupling, wrench)
         self._feel(wrench)
         if self.progress is not None:
