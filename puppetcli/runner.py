@@ -133,6 +133,7 @@ class Runner:
         self.peak = self.peak_since_key = self.peak_displayed = 0.0
         self.displayed = ((0.0,) * 3, (0.0,) * 3)  # the last step's wrench on the hand
         self._handlers: dict | None = None
+        self.upgrade: Callable[[], bool] | None = None  # True: move to the compiled step
 
     @property
     def state(self) -> State:
@@ -159,10 +160,19 @@ class Runner:
         """Carry out one action (steps the simulation for a timed one)."""
         if self._handlers is None:
             self._handlers = self._handler_table()
+        if self.upgrade is not None and self.upgrade():
+            self._upgrade()
         began = self.sim.time
         self._handlers[type(action)](action)
         if self.on_action is not None:
             self.on_action(action, began)
+
+    def _upgrade(self) -> None:
+        """Go on from the current state on the compiled step (puppetcli.warmup: the numpy
+        step ran until the compiled one was built)."""
+        self.upgrade = None
+        self.model = self.model.with_options(engine="compiled")
+        self.sim = Engine(self.model).stepper(self.sim.state)
 
     def _handler_table(self) -> dict:
         return {

@@ -1,9 +1,11 @@
 """Shared test set-up: this folder is on sys.path, so tests import its helper modules;
-BLAS runs single-threaded as in the CLI (see solver/__init__.py)."""
+BLAS runs single-threaded as in the CLI (see solver/__init__.py); the CLI runs on the compiled
+solver (a first run waits for it to compile rather than starting on the numpy step)."""
 
 import os
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+os.environ.setdefault("PUPPETCLI_ENGINE", "compiled")  # no background build: tests wait for it
 
 
 def pytest_runtest_setup(item):

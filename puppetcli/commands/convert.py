@@ -19,7 +19,7 @@ from puppetcli.rigfile import load_rig
 from puppetcli.runner import Runner, script_model
 from puppetcli.script import load_script
 from puppetcli.skeleton import Skeleton
-from puppetcli.warmup import warm_up_step
+from puppetcli.warmup import ENGINE_OPTION, prepare_engine
 from solver.model import Model, build_model
 
 MAX_STEPS = 10_000_000  # as `pose`: a run longer than this is a mistake in the script
@@ -49,8 +49,16 @@ KEYS_FPS = 30.0  # Frame Time of a BVH of keys when no --fps is given
     help="File units per metre (100 for centimetres).",
 )  # fmt: skip
 @click.option("--force", is_flag=True, help="Overwrite OUT.bvh if it exists.")
+@ENGINE_OPTION
 def command(
-    source: Path, out: Path, rig: Path, fps: float | None, order: str, scale: float, force: bool
+    source: Path,
+    out: Path,
+    rig: Path,
+    fps: float | None,
+    order: str,
+    scale: float,
+    force: bool,
+    engine: str,
 ) -> None:
     """Run the manipulation script SOURCE (.yaml), or replay the recorded session SOURCE
     (.mcap, see docs/sessions.md), on RIG and write its motion as BVH.
@@ -72,8 +80,9 @@ def command(
             f"{source}: expected at most {MAX_STEPS:,} steps, got {_total_steps(model, plan):,} "
             f"(duration over step h = {model.options.h:g} s)"
         )
-    warm_up_step(model)
+    model, upgrade = prepare_engine(model, engine, rig)
     runner = replay.runner(model) if replay is not None else Runner(model, plan)
+    runner.upgrade = upgrade
     sampler = FrameSampler(model, fps, runner.state) if fps is not None else None
     with _progress(_total_steps(model, plan)) as tick:
         runner.on_step, runner.progress = sampler, tick

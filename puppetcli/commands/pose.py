@@ -17,7 +17,7 @@ from puppetcli.rigfile import load_rig
 from puppetcli.runner import Runner, RunResult, script_model
 from puppetcli.runtrace import RunTrace
 from puppetcli.script import load_script
-from puppetcli.warmup import warm_up_step
+from puppetcli.warmup import ENGINE_OPTION, prepare_engine
 from solver.model import build_model
 
 OUTPUTS = ["keyframes.json", "keyframes.bvh", "trace.mcap", "sheet.png", "keys"]
@@ -87,6 +87,7 @@ MAX_STEPS = 10_000_000  # a run longer than this is a mistake in the script (h o
     show_default=True,
     help="Camera for the pictures: front, side, top, iso or custom:AZ,EL[,DIST].",
 )
+@ENGINE_OPTION
 def command(
     rig: Path,
     script: Path,
@@ -101,6 +102,7 @@ def command(
     interpolate: str,
     scale: float,
     view: str,
+    engine: str,
 ) -> None:
     """Run a manipulation script (or replay a session .mcap) on a rig: keyframes, BVH, a
     trace and pictures.
@@ -124,7 +126,8 @@ def command(
     skipped = {"trace.mcap"} if no_trace else set()
     skipped |= {"sheet.png", "keys"} if no_render else set()
     prepare_outdir(outdir, [name for name in OUTPUTS if name not in skipped], force)
-    result = _run(model, plan, outdir, trace_every, no_trace, replay)
+    model, upgrade = prepare_engine(model, engine, rig)
+    result = _run(model, plan, outdir, trace_every, no_trace, replay, upgrade)
     write_key_outputs(
         outdir, spec, model.name, list(result.keys), render=not no_render, order=order, fps=fps,
         scale=scale, interpolate=None if interpolate == "none" else interpolate, view=view,
@@ -151,15 +154,15 @@ def _check_length(script: Path, plan, h: float) -> None:
 
 
 def _run(
-    model, plan, outdir: Path, trace_every: int, no_trace: bool, replay: Replay | None = None
+    model, plan, outdir: Path, trace_every: int, no_trace: bool, replay: Replay | None, upgrade
 ) -> RunResult:
-    warm_up_step(model)
     total = max(plan.duration or 0.0, _timeline_length(plan))
     with _progress(round(total / model.options.h)) as tick:
         if replay is not None:
             runner = replay.runner(model, progress=tick)
         else:
             runner = Runner(model, plan, progress=tick)
+        runner.upgrade = upgrade
         if no_trace:
             return runner.run()
         path, spidar = outdir / "trace.mcap", replay is not None
