@@ -19,6 +19,7 @@ import numpy as np
 from solver import quat
 from solver.advance.integrate import free_velocity
 from solver.compiled.clock import STAGES, counter_read_seconds, seconds_per_cycle
+from solver.compiled.layout import IOpt
 from solver.engine import Engine
 from solver.model import Model
 from solver.observe import bone_points
@@ -184,7 +185,7 @@ def stage_profile(
     the doll): the stages absorb that.  Each figure is the best of ``repeats`` runs."""
     engine = Engine(model)
     fm = engine.packed
-    prof = fm.ws[10]
+    prof = fm.ws.cycles
     engine.step(state, inputs[0])  # compiled and cached before the count starts
     per_cycle, read = seconds_per_cycle(), counter_read_seconds()
     n = len(inputs)
@@ -193,11 +194,11 @@ def stage_profile(
     for _ in range(repeats):
         wall = min(wall, _run(engine, state, inputs)[0] / n * 1e6)
         prof[:] = 0
-        fm.iopt[7] = 1
+        fm.iopt[IOpt.profiling] = 1
         try:
             _run(engine, state, inputs)
         finally:
-            fm.iopt[7] = 0
+            fm.iopt[IOpt.profiling] = 0
         for k, name in enumerate(STAGES):
             reads = 2 if k == 3 else 1
             us = float(prof[k]) * per_cycle / n * 1e6 - reads * read * 1e6

@@ -213,7 +213,8 @@ def congruence(rot, i, inner, j, out, o):
 @kernel(error_model="numpy", _nrt=False)
 def frames(quat, inertia, inv_inertia, rot, inertia_w, inv_i):
     """rot, inertia_w, inv_i (nb,3,3) ← each body's rotation R(q), world inertia R I Rᵀ
-    and its inverse R I⁻¹ Rᵀ (inertia, inv_inertia: the bodies' own, m[17], m[18])."""
+    and its inverse R I⁻¹ Rᵀ (inertia, inv_inertia: the bodies' own,
+    m.body_inertia, m.body_inv_inertia)."""
     for b in range(len(quat)):
         qmatrix(quat_at(quat, b), rot, b)
         congruence(rot, b, inv_inertia, b, inv_i, b)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from solver.advance.integrate import MIDPOINT_PASSES
+from solver.compiled.layout import Flags, Opt
 from solver.jit import kernel
 from solver.kin_kernel import (
     add,
@@ -74,14 +75,14 @@ def integrate(inertia, inv_inertia, h, pos, quat, vel, rot, asleep, out_pos, out
 @kernel(error_model="numpy", _nrt=False)
 def free_velocity(inv_mass, opt, vel, omega, inv_i, loads, out):
     """(nb,6) velocities after gravity and external loads (force, torque, flags: the
-    input's inp[0], inp[1], inp[4]), before constraints."""
+    input's inp.force, inp.torque, inp.flags), before constraints."""
     force, torque, ivec = loads
-    h = opt[0]
+    h = opt[Opt.h]
     for b in range(len(vel)):
         tau = matvec(inv_i, b, (torque[b, 0], torque[b, 1], torque[b, 2]))
         for k in range(3):
-            acc = opt[12 + k] if inv_mass[b] > 0.0 else 0.0
-            if ivec[3]:
+            acc = opt[Opt.gravity + k] if inv_mass[b] > 0.0 else 0.0
+            if ivec[Flags.has_force]:
                 acc = acc + force[b, k] * inv_mass[b]
             out[b, k] = vel[b, k] + h * acc
-            out[b, 3 + k] = omega[b, k] + h * tau[k] if ivec[4] else omega[b, k]
+            out[b, 3 + k] = omega[b, k] + h * tau[k] if ivec[Flags.has_torque] else omega[b, k]

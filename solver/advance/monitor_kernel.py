@@ -4,6 +4,7 @@ joint gaps."""
 from __future__ import annotations
 
 from solver.advance.stabilize_kernel import PROJECT_TOL, gap2
+from solver.compiled.layout import Opt
 from solver.jit import kernel
 
 
@@ -13,7 +14,7 @@ def gaps_within(projected, opt):
     monitor's limit without measuring it, when nothing needed projecting (every awake
     joint within PROJECT_TOL, and PROJECT_TOL within the limit) — the sleeping joints
     have not moved since the step's first check (``state_ok`` on its start pose)."""
-    return not projected and opt[10] >= PROJECT_TOL
+    return not projected and opt[Opt.max_joint_gap] >= PROJECT_TOL
 
 
 @kernel(error_model="numpy", _nrt=False)
@@ -24,7 +25,10 @@ def state_ok(joints, opt, pos, quat, lin, ang, gaps_known):
     squared.  gaps_known: every anchor gap is already known to be within the limit
     (the caller's ``gaps_within``), so they are not measured again."""
     poison, fast = 0.0, False
-    max_speed2, max_spin2 = opt[8] * opt[8], opt[9] * opt[9]
+    max_speed2, max_spin2 = (
+        opt[Opt.max_speed] * opt[Opt.max_speed],
+        opt[Opt.max_angular_speed] * opt[Opt.max_angular_speed],
+    )
     for b in range(len(pos)):
         for k in range(3):
             poison += 0.0 * pos[b, k] + 0.0 * lin[b, k] + 0.0 * ang[b, k]
@@ -37,8 +41,8 @@ def state_ok(joints, opt, pos, quat, lin, ang, gaps_known):
         return False
     if gaps_known:
         return True
-    limit2 = opt[10] * opt[10]
+    limit2 = opt[Opt.max_joint_gap] * opt[Opt.max_joint_gap]
     within = True
-    for j in range(len(joints[0])):
+    for j in range(len(joints.parent)):
         within = within and gap2(joints, pos, quat, j) <= limit2
     return within

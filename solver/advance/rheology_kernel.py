@@ -4,6 +4,7 @@ solver/advance/rheology.py): q_sf, yield, anchors, torques.
 
 from __future__ import annotations
 
+from solver.compiled.layout import Opt
 from solver.jit import kernel
 from solver.kin_kernel import (
     neg,
@@ -25,14 +26,21 @@ def rheology_update(rheo, opt, prev, rw, n, lam, vel, rheo_joint, quat, asleep, 
     """q_sf, yield flags, anchors, torque filter and torques after the solve; the joints
     of sleeping bodies (asleep) keep their state (their torque reads 0: no rows).
     rheo: the model's joint parents, bones, K_f, D_f, D_d, has rheology, yield torque,
-    plastic, finite yield (m[0], m[1], m[4]–m[7], m[12]–m[14]); prev: the state's q_sf,
-    yield flags, anchors, torque filter (st[4:8]); w (nj, 3): scratch (the rheology rows'
+    plastic, finite yield (layout.Rheology); prev: the state's q_sf, yield flags, anchors,
+    torque filter; w (nj, 3): scratch (the rheology rows'
     velocities)."""
     parent, bone, kf, df, dd, has, yield_, plastic, finite_yield = rheo
     q_sf0, yielded0, anchor0, avg0 = prev
     q_sf, yielded, anchor, avg, torque = out
-    h = opt[0]
-    nj, body_a, body_b, jac_a, jac_b, kind = len(parent), rw[0], rw[1], rw[2], rw[3], rw[11]
+    h = opt[Opt.h]
+    nj, body_a, body_b, jac_a, jac_b, kind = (
+        len(parent),
+        rw.body_a,
+        rw.body_b,
+        rw.jac_a,
+        rw.jac_b,
+        rw.kind,
+    )
     torque[:, :] = 0.0
     w[:, :] = 0.0
     slot = 0
@@ -48,7 +56,7 @@ def rheology_update(rheo, opt, prev, rw, n, lam, vel, rheo_joint, quat, asleep, 
         torque[j, slot % 3] = lam[i]
         w[j, slot % 3] = wa + wb
         slot += 1
-    alpha = h / (opt[7] + h)
+    alpha = h / (opt[Opt.yield_filter_time] + h)
     for j in range(nj):
         tn = norm((torque[j, 0], torque[j, 1], torque[j, 2]))
         flow0 = flowing(plastic, finite_yield, yielded0, j)

@@ -18,7 +18,6 @@ ordinary steps: below ``tol`` the step conserves momentum exactly.
 from __future__ import annotations
 
 import numpy as np
-import scipy.linalg
 
 from solver import quat
 from solver.model import Model
@@ -43,6 +42,8 @@ def project_joints(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Positions and orientations with the joint anchors pulled together; the joints of
     sleeping bodies (``asleep`` (nb,) bool: solver.advance.sleep) are left as they are."""
+    import scipy.linalg  # on use: the compiled step never needs it, and it costs ~0.3 s to import
+
     if model.njoint == 0:
         return pos, q
     nb = model.nbody

@@ -53,21 +53,21 @@ def project(m, joints, tree, pws, pos, quat, asleep):
     prw, pa, pb, rot, inv_i, inertia_w, mu = pws
     nb = len(pos)
     zeros = np.zeros((nb, 6))
-    seq, nseq, bone = np.empty(len(order), np.int64), 0, m[1]
+    seq, nseq, bone = np.empty(len(order), np.int64), 0, m.joint_bone
     for i in order:
         if not (asleep[i] if i < nb else asleep[bone[i - nb]]):
             seq[nseq], nseq = i, nseq + 1
     for k in range(PROJECT_ROUNDS):
         if k > 0 and not needs_projection(joints, pos, quat, asleep):
             break
-        frames(quat, m[17], m[18], rot, inertia_w, inv_i)
+        frames(quat, m.body_inertia, m.body_inv_inertia, rot, inertia_w, inv_i)
         n = anchor_rows(joints, pos, rot, pos, 1.0, 1.0, False, asleep, prw, 0)
-        response(prw, 0, n, m[16], inv_i, 1.0, pa, pb)
-        prw[6][:n] = PROJECT_RIDGE
+        response(prw, 0, n, m.body_inv_mass, inv_i, 1.0, pa, pb)
+        prw.comp[:n] = PROJECT_RIDGE
         for i in order:
             size[i] = node_rows(i, nb, no_rheo, rows[i])
         if not tree_solve(
-            seq, nseq, parent, nb, prw, zeros, 1.0, m[15], inertia_w, rows, size, tw, mu
+            seq, nseq, parent, nb, prw, zeros, 1.0, m.body_mass, inertia_w, rows, size, tw, mu
         ):
             return False
         delta = np.zeros((nb, 6))
@@ -84,10 +84,10 @@ def project(m, joints, tree, pws, pos, quat, asleep):
 @kernel(error_model="numpy", inline="always")
 def gap2(joints, pos, quat, j):
     """The square of joint j's anchor distance (m²); joints: the model's joint parents,
-    bones and anchors (m[0], m[1], m[2], m[3]).  Inlined (16–48 uses a step): called
+    bones and anchors (layout.Joints).  Inlined (16–48 uses a step): called
     from a function with reference counting, each call counted its six arrays in and out
     (12 calls to NRT); the step runs without it now (kernel._step), the projection with."""
-    p, c, anc_p, anc_c = joints[0][j], joints[1][j], joints[2], joints[3]
+    p, c, anc_p, anc_c = joints.parent[j], joints.bone[j], joints.anchor_parent, joints.anchor_child
     a = add(vec(pos, p), qrotate(quat_at(quat, p), vec(anc_p, j))) if p >= 0 else vec(anc_p, j)
     d = sub(add(vec(pos, c), qrotate(quat_at(quat, c), vec(anc_c, j))), a)
     return dot(d, d)
@@ -98,7 +98,7 @@ def awake_gap2(joints, pos, quat, asleep):
     """The square of the largest anchor distance (m²) of the joints of awake bodies (0
     when none); joints as ``gap2``'s."""
     worst = 0.0
-    for j in range(len(joints[0])):
-        if not asleep[joints[1][j]]:
+    for j in range(len(joints.parent)):
+        if not asleep[joints.bone[j]]:
             worst = max(worst, gap2(joints, pos, quat, j))
     return worst

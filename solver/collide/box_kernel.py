@@ -51,11 +51,11 @@ def box_normal(p, half):
         1.0 if p[1] >= 0.0 else -1.0,
         1.0 if p[2] >= 0.0 else -1.0,
     )
-    out = (max(q[0], 0.0), max(q[1], 0.0), max(q[2], 0.0))
-    length = norm(out)
+    outside = (max(q[0], 0.0), max(q[1], 0.0), max(q[2], 0.0))
+    length = norm(outside)
     if length > 0.0:
         m = max(length, 1e-300)
-        return (sign[0] * out[0] / m, sign[1] * out[1] / m, sign[2] * out[2] / m)
+        return (sign[0] * outside[0] / m, sign[1] * outside[1] / m, sign[2] * outside[2] / m)
     k = 0
     if q[1] > q[k]:
         k = 1

@@ -19,7 +19,15 @@ POINTER_KEY_OFFSET = 1 << 32
 @kernel(error_model="numpy")
 def collide_pointer(g, centre, rot, pc, pr, margin, cb, n):
     """Contacts of the pointer sphere (centre pc, radius pr) with every body shape."""
-    shape_body, kind, radius, half, bound, shapes, mu = g[0], g[3], g[4], g[5], g[6], g[14], g[15]
+    shape_body, kind, radius, half, bound, shapes, mu = (
+        g.shape_body,
+        g.shape_kind,
+        g.shape_radius,
+        g.shape_half,
+        g.shape_bound,
+        g.touchable,
+        g.touch_friction,
+    )
     for rank in range(len(shapes)):
         k = shapes[rank]
         if not (norm(sub(vec(centre, k), pc)) - pr) - bound[k] <= margin:

@@ -32,7 +32,7 @@ Y_AXIS = (0.0, 1.0, 0.0)
 @kernel(error_model="numpy")
 def world_shapes(g, body_pos, body_quat, centre, rot):
     """World centres (ns,3) and rotations (ns,3,3) of all shapes into centre, rot."""
-    shape_body, shape_pos, shape_quat = g[0], g[1], g[2]
+    shape_body, shape_pos, shape_quat = g.shape_body, g.shape_pos, g.shape_quat
     for k in range(len(shape_body)):
         b = shape_body[k]
         if b >= 0:
@@ -51,8 +51,16 @@ def collide_scene(g, centre, rot, margin, cb, cull, awake):
     ``cull``, pairs whose bounding spheres are farther apart than the margin are skipped
     before the narrow phase (which would find nothing there either); pairs with no
     awake movable body (awake (nb,) bool: solver.advance.sleep) are skipped altogether."""
-    kind, radius, half, bound = g[3], g[4], g[5], g[6]
-    pair_f, pair_s, group, sign, body_a, body_b, mu = g[7], g[8], g[9], g[10], g[11], g[12], g[13]
+    kind, radius, half, bound = g.shape_kind, g.shape_radius, g.shape_half, g.shape_bound
+    pair_f, pair_s, group, sign, body_a, body_b, mu = (
+        g.pair_first,
+        g.pair_second,
+        g.pair_group,
+        g.pair_sign,
+        g.pair_body_a,
+        g.pair_body_b,
+        g.pair_friction,
+    )
     n = 0
     for p in range(len(pair_f)):
         f, s = pair_f[p], pair_s[p]

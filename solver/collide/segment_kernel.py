@@ -20,13 +20,13 @@ EARLY_OUT = 1e-6  # m: slack of the exact early-outs of segment_segment and segm
 def emit(cb, n, ctx, feature, point, normal, depth):
     """Write contact n (normal already oriented first → second); returns n + 1."""
     body_a, body_b, friction, sign, key_base = ctx
-    cb[0][n] = body_a
-    cb[1][n] = body_b
-    put(cb[2], n, point)
-    put(cb[3], n, scale(sign, normal))
-    cb[4][n] = depth
-    cb[5][n] = friction
-    cb[6][n] = key_base + feature
+    cb.body_a[n] = body_a
+    cb.body_b[n] = body_b
+    put(cb.point, n, point)
+    put(cb.normal, n, scale(sign, normal))
+    cb.depth[n] = depth
+    cb.friction[n] = friction
+    cb.key[n] = key_base + feature
     return n + 1
 
 

@@ -29,6 +29,7 @@ import numpy as np
 
 from solver.advance.substep import run_substeps
 from solver.compiled.entry import fast_kernel
+from solver.compiled.layout import Coupling, Input, Pointer, ReportFloat, ReportInt, StateSet
 from solver.compiled.pack import FastModel
 from solver.pipeline import step
 from solver.rows.grip_kernel import MODE_GRIP, MODE_NONE, MODE_TOUCH
@@ -39,7 +40,7 @@ __all__ = ["fast_step", "supports"]
 
 SOLVER_NAMES = ("direct", "pgs", "hybrid")
 _F8, _I8, _B1 = np.dtype(np.float64), np.dtype(np.int64), np.dtype(np.bool_)
-_NO_VEC = np.zeros(16)  # the pointer / coupling argument when there is none (never read)
+_NO_VEC = np.zeros(Coupling.SIZE)  # the pointer / coupling argument when there is none (never read)
 _NO_INPUT = StepInput()  # frozen: one for every step without input
 
 
@@ -65,7 +66,7 @@ def _state_arrays(fm: FastModel, state: State) -> tuple | None:
     last are trusted as they are."""
     if state is fm.last[0]:
         return fm.last[1]
-    nb, nj = len(fm.m[15]), len(fm.m[0])
+    nb, nj = len(fm.m.body_mass), len(fm.m.joint_parent)
     arrays = (
         _arr(state.body_pos, _F8, (nb, 3)),
         _arr(state.body_quat, _F8, (nb, 4)),
@@ -85,13 +86,14 @@ def _state_arrays(fm: FastModel, state: State) -> tuple | None:
     warm = (_arr(state.warm_key, _I8, nw), _arr(state.warm_lam, _F8, nw))
     if any(a is None for a in (*arrays, *sleep, *warm)):
         return None
-    return (*arrays, arrays[4], *sleep), *warm  # τ is not read: q_sf, of its type, stands in
+    prev = StateSet(*arrays, arrays[4], *sleep)  # τ is not read: q_sf, of its type, stands in
+    return prev, *warm
 
 
 def _input_arrays(fm: FastModel, inp: StepInput) -> tuple | None:
-    """The kernel's input tuple (force, torque, pointer (14,), coupling (16,), flags (5,)),
-    or None when the numpy step must decide what the input means.  The pointer and the
-    flags are fm's own arrays, rewritten for every step (they are read only during it)."""
+    """The kernel's input (layout.Input: force, torque, pointer, coupling, flags), or None
+    when the numpy step must decide what the input means.  The pointer and the flags are
+    fm's own arrays, rewritten for every step (they are read only during it)."""
     nb = len(fm.zeros)
     force, torque, ptr, cpl = inp.body_force, inp.body_torque, inp.pointer, inp.coupling
     loads = (force is not None, torque is not None)
@@ -107,7 +109,7 @@ def _input_arrays(fm: FastModel, inp: StepInput) -> tuple | None:
             if not len(ptr.pos) == len(ptr.vel) == len(ptr.omega) == 3 == len(ptr.quat) - 1:
                 return None
             pos[...], rotation[...], vel[...], omega[...] = ptr.pos, ptr.quat, ptr.vel, ptr.omega
-            pvec[13] = ptr.radius
+            pvec[Pointer.radius] = ptr.radius
         except (TypeError, ValueError):  # not 13 numbers
             return None
         mode = MODE_TOUCH
@@ -121,12 +123,11 @@ def _input_arrays(fm: FastModel, inp: StepInput) -> tuple | None:
     flags = (mode, body, position_only, *loads)
     if flags != fm.flags:  # comparing costs a tenth of writing
         fm.ivec[:], fm.flags = flags, flags
-    return force, torque, pvec, cvec, fm.ivec
+    return Input(force, torque, pvec, cvec, fm.ivec)
 
 
 def _coupling_vec(cpl) -> np.ndarray:
-    """anchor (3), offset (3), rest (4), stiffness, damping, rot_stiffness, rot_damping,
-    force_limit, torque_limit."""
+    """The coupling's vector (layout.Coupling: the fields of the same names, in order)."""
     gains = (cpl.stiffness, cpl.damping, cpl.rot_stiffness, cpl.rot_damping,
              cpl.force_limit, cpl.torque_limit)  # fmt: skip
     return np.concatenate((cpl.anchor, cpl.offset, cpl.rest, gains), dtype=_F8)
@@ -153,10 +154,9 @@ _KERNEL = entry_point(fast_kernel)
 
 
 def new_state_arrays(nb: int, nj: int) -> tuple:
-    """Uninitialised (x, q, v, ω, q_sf, yielded, anchor, τ_avg, τ, asleep, still) for the
-    kernel's out."""
+    """An uninitialised layout.StateSet for the kernel's out."""
     e = np.empty
-    return (e((nb, 3)), e((nb, 4)), e((nb, 3)), e((nb, 3)), e((nj, 3)), e(nj, _B1),
+    return StateSet(e((nb, 3)), e((nb, 4)), e((nb, 3)), e((nb, 3)), e((nj, 3)), e(nj, _B1),
             e((nj, 4)), e(nj), e((nj, 3)), e(nb, _B1), e(nb))  # fmt: skip
 
 
@@ -176,10 +176,10 @@ def fast_step(
     if st is None or ins is None:
         return step(model, state, inp)
     prev, keys, lam = st
-    out, rep_f = new_state_arrays(len(prev[0]), len(prev[4])), np.empty(10)
+    out, rep_f = new_state_arrays(len(prev.x), len(prev.q_sf)), np.empty(ReportFloat.SIZE)
     status, warm_key, warm_lam = _KERNEL[0](fm.flat, prev, keys, lam, ins, out, fm.rep_i, rep_f)
     if status == SUBSTEP:
-        n = int(fm.rep_i[0])
+        n = int(fm.rep_i[ReportInt.rows])  # the substeps asked for
         sub = fm.sub(n)
         return run_substeps(model, state, inp, n, lambda _m, s, part: fast_step(sub, s, part))
     if status:
@@ -227,22 +227,23 @@ _REPORT_FIELDS = ("rows", "contacts", "iterations", "residual", "solver", "grip_
 _DIRECT_REPORT = _direct(StepReport, _REPORT_FIELDS) == ()
 
 
-def _successor(state: State, time: float, steps: int, out: tuple, keys, lam) -> State:
-    """The State after ``state``: time, steps, the kernel's out (x … τ), warm keys and λ
+def _successor(state: State, time: float, steps: int, out: StateSet, keys, lam) -> State:
+    """The State after ``state``: time, steps, the kernel's out, warm keys and λ
     (a subclass of State keeps its other fields, as ``replace`` does)."""
     if type(state) is State and _STATE_REST is not None:
         new = _NEW(State)
         values = new.__dict__
         values.update(
-            time=time, step=steps, body_pos=out[0], body_quat=out[1], body_vel=out[2],
-            body_omega=out[3], joint_q_sf=out[4], joint_yielded=out[5], joint_anchor=out[6],
-            joint_torque_avg=out[7], joint_torque=out[8], warm_key=keys, warm_lam=lam,
-            body_asleep=out[9], body_still=out[10],
+            time=time, step=steps, body_pos=out.x, body_quat=out.q, body_vel=out.v,
+            body_omega=out.omega, joint_q_sf=out.q_sf, joint_yielded=out.yielded,
+            joint_anchor=out.anchor, joint_torque_avg=out.torque_avg, joint_torque=out.torque,
+            warm_key=keys, warm_lam=lam, body_asleep=out.asleep, body_still=out.still,
         )  # fmt: skip
         for name, default in _STATE_REST:  # fields the kernel does not produce
             values[name] = default()
         return new
-    arrays = dict(zip(FIELDS, (*out[:9], keys, lam, *out[9:]), strict=True))
+    new = (*out[: StateSet._fields.index("asleep")], keys, lam, out.asleep, out.still)
+    arrays = dict(zip(FIELDS, new, strict=True))
     if type(state) is State:
         return State(time=time, step=steps, **arrays)
     return replace(state, time=time, step=steps, **arrays)
@@ -252,11 +253,13 @@ def kernel_report(rep_i: np.ndarray, rep_f: np.ndarray) -> StepReport:
     """The StepReport of the kernel's report arrays (rows, contacts, iterations, solver;
     residual, grip force, grip torque, touch force).  Its vectors are views of rep_f: pass
     an array of the caller's own."""
-    rows, contacts, iterations, solver = rep_i.tolist()
+    rows, contacts, iterations, solver = rep_i.tolist()  # layout.ReportInt's order
+    at = ReportFloat
     values = dict(
-        rows=rows, contacts=contacts, iterations=iterations, residual=float(rep_f[0]),
-        solver=SOLVER_NAMES[solver], grip_force=rep_f[1:4], grip_torque=rep_f[4:7],
-        touch_force=rep_f[7:10], substeps=1,
+        rows=rows, contacts=contacts, iterations=iterations, residual=float(rep_f[at.residual]),
+        solver=SOLVER_NAMES[solver], grip_force=rep_f[at.grip_force : at.grip_torque],
+        grip_torque=rep_f[at.grip_torque : at.touch_force],
+        touch_force=rep_f[at.touch_force : at.SIZE], substeps=1,
     )  # fmt: skip
     if not _DIRECT_REPORT:
         return StepReport(**values)

@@ -1,36 +1,16 @@
 """A Model packed once for the compiled step: arrays, the elimination forest, workspaces.
 
-``pack(model)`` builds a ``FastModel`` (solver.engine.Engine holds it): struct-of-arrays
-tuples with fixed layouts the kernels index by position, the options as two small
-arrays, and preallocated row/contact workspaces sized for the worst case (6 rows per
-joint, 3 limit rows per joint, 3 rows per possible contact, and the grip's 6). The
-workspaces make a FastModel usable by one thread at a time.
+``pack(model)`` builds a ``FastModel`` (solver.engine.Engine holds it): the model's arrays,
+geometry, forest and workspaces as the named structures of ``solver.compiled.layout``
+(``Packed``), the options as two small arrays with named offsets (``Opt``, ``IOpt``), and
+preallocated row/contact workspaces sized for the worst case (6 rows per joint, 3 limit
+rows per joint, 3 rows per possible contact, and the grip's 6).  The workspaces make a
+FastModel usable by one thread at a time.
 
-Every array of those tuples is a view into three buffers, ``flat`` (solver.compiled.flat):
-the compiled step is passed the buffers and rebuilds the tuples itself, which saves
-unboxing ~100 arrays per call; writes through the views (``fm.iopt[7] = 1``) are seen by
-the step.
-
-Tuple layouts:
-  m    0 joint_parent 1 joint_bone 2 anchor_parent 3 anchor_child 4 kf 5 df 6 dd
-       7 joint_rheology 8 joint_axis 9 swing 10 twist_lo 11 twist_hi 12 yield
-       13 plastic (all D_d finite) 14 finite yield 15 body_mass 16 body_inv_mass
-       17 body_inertia 18 body_inv_inertia 19 body island (solver.advance.sleep)
-       20 joints' tension levers (solver.advance.substep.tension_levers) 21 limit thresholds
-       (solver.rows.joints_kernel.limit_thresholds)
-  g    0 shape_body 1 shape_pos 2 shape_quat 3 kind 4 radius 5 half 6 bound 7 pair first
-       8 pair second 9 group 10 normal sign 11 body_a 12 body_b 13 friction
-       14 pointer-touchable shapes 15 their friction with the pointer
-  tree 0 static elimination order 1 node parent 2 first rheology row per joint
-       3 no-rheology marker 4 sequence buffer 5 node rows 6 node sizes 7 (D, Y, w, g)
-  ws   0 rows 1 resp_a 2 resp_b 3 joint of each rheology row 4 contacts 5 rot 6 I_w⁻¹
-       7 I_w 8 shape centres 9 shape rotations 10 cycles per stage (solver.compiled.kernel)
-  opt  h, joint_erp, contact_erp, contact_slop, contact_margin, limit_margin,
-       regularization, yield_filter_time, max_speed, max_angular_speed, max_joint_gap,
-       warm_start_factor, gravity (3), sleep speed, sleep spin, sleep time
-  iopt method (0 auto, 1 pgs, 2 direct, 3 hybrid), iterations, warm_start, has rheology,
-       has limits, has collision, max substeps, profiling on, cull pairs, dormant rows,
-       sleep
+Every array of those structures is a view into a few buffers, ``flat``
+(solver.compiled.flat): the compiled step is passed the buffers and rebuilds the
+structures itself, which saves unboxing ~100 arrays per call; writes through the views
+(``fm.iopt[IOpt.profiling] = 1``) are seen by the step.
 """
 
 from __future__ import annotations
@@ -44,6 +24,24 @@ from solver.advance.sleep import body_islands
 from solver.advance.substep import model_levers, sub_model
 from solver.compiled.clock import STAGES
 from solver.compiled.flat import flatten
+from solver.compiled.layout import (
+    BUFFERS,
+    Contacts,
+    Flags,
+    Geometry,
+    IOpt,
+    ModelArrays,
+    Opt,
+    Packed,
+    Pointer,
+    ProjectionTree,
+    ProjectionWorkspace,
+    ReportInt,
+    Rows,
+    Tree,
+    TreeWork,
+    Workspace,
+)  # fmt: skip
 from solver.model import Model
 from solver.rows.joints_kernel import limit_thresholds
 
@@ -58,27 +56,21 @@ _CLASS = np.array([0, 1, 1, 2])
 class FastModel:
     """Packed arrays and workspaces of one Model; ``reason`` is why it is unsupported.
 
-    m … iopt: views into ``flat`` (module docstring); zeros (nb,3): the force and torque
-    of a step without loads; pvec (14,), ivec (5,), rep_i (4,): the step's pointer and
-    flag inputs and integer report, rewritten by every step (solver.compiled.fast); pointer:
+    packed: views into ``flat`` (module docstring; the properties ``m`` … ``iopt`` are its
+    parts); zeros (nb,3): the force and torque of a step without loads; pvec, ivec, rep_i
+    (layout's Pointer, Flags, ReportInt): the step's pointer and flag inputs and integer
+    report, rewritten by every step (solver.compiled.fast); pointer:
     pvec's position, quaternion, velocity and angular velocity views (made once: an
     assignment through a view costs a fifth of slicing pvec each step)."""
 
-    m: tuple
-    g: tuple
-    tree: tuple
-    ptree: tuple
-    ws: tuple
-    pws: tuple
-    opt: np.ndarray
-    iopt: np.ndarray
+    packed: Packed
     flat: tuple
     zeros: np.ndarray
     reason: str | None
     model: Model
-    pvec: np.ndarray = field(default_factory=lambda: np.zeros(14))
-    ivec: np.ndarray = field(default_factory=lambda: np.zeros(5, np.int64))
-    rep_i: np.ndarray = field(default_factory=lambda: np.zeros(4, np.int64))
+    pvec: np.ndarray = field(default_factory=lambda: np.zeros(Pointer.SIZE))
+    ivec: np.ndarray = field(default_factory=lambda: np.zeros(Flags.SIZE, np.int64))
+    rep_i: np.ndarray = field(default_factory=lambda: np.zeros(ReportInt.SIZE, np.int64))
     flags: tuple = (0, 0, False, False, False)  # what ivec holds
     last: tuple = (None, None)  # (State fast_step returned last, its kernel arrays)
     coupling: tuple = (None, None, None)  # (Coupling packed last, its array, its flags)
@@ -86,8 +78,18 @@ class FastModel:
     subs: dict = field(default_factory=dict)  # n → the FastModel of the step at h/n
 
     def __post_init__(self) -> None:
-        p = self.pvec
-        self.pointer = (p[0:3], p[3:7], p[7:10], p[10:13])
+        p, at = self.pvec, Pointer
+        self.pointer = (p[at.pos : at.quat], p[at.quat : at.vel], p[at.vel : at.omega],
+                        p[at.omega : at.radius])  # fmt: skip
+
+    m = property(lambda self: self.packed.m)
+    g = property(lambda self: self.packed.g)
+    tree = property(lambda self: self.packed.tree)
+    ptree = property(lambda self: self.packed.ptree)
+    ws = property(lambda self: self.packed.ws)
+    pws = property(lambda self: self.packed.pws)
+    opt = property(lambda self: self.packed.opt)
+    iopt = property(lambda self: self.packed.iopt)
 
     def sub(self, n: int) -> FastModel:
         """The packed model of this model's step at h/n (solver.advance.substep),
@@ -106,29 +108,29 @@ def pack(model: Model) -> FastModel:
     """Pack a model (see the module docstring for the layouts)."""
     nb, nj = model.nbody, model.njoint
     plastic = np.all(np.isfinite(model.joint_dd), axis=1) if nj else np.zeros(0, bool)
-    m = (
-        _c(model.joint_parent, np.int64),
-        _c(model.joint_bone, np.int64),
-        _c(model.joint_anchor_parent),
-        _c(model.joint_anchor_child),
-        _c(model.joint_kf),
-        _c(model.joint_df),
-        _c(model.joint_dd),
-        _c(model.joint_rheology, np.bool_),
-        _c(model.joint_axis),
-        _c(model.joint_swing),
-        _c(model.joint_twist_lo),
-        _c(model.joint_twist_hi),
-        _c(model.joint_yield),
-        _c(plastic, np.bool_),
-        _c(np.isfinite(model.joint_yield), np.bool_),
-        _c(model.body_mass),
-        _c(model.body_inv_mass),
-        _c(model.body_inertia),
-        _c(model.body_inv_inertia),
-        _c(body_islands(model), np.int64),
-        _c(model_levers(model)),
-        _c(
+    m = ModelArrays(
+        joint_parent=_c(model.joint_parent, np.int64),
+        joint_bone=_c(model.joint_bone, np.int64),
+        joint_anchor_parent=_c(model.joint_anchor_parent),
+        joint_anchor_child=_c(model.joint_anchor_child),
+        joint_kf=_c(model.joint_kf),
+        joint_df=_c(model.joint_df),
+        joint_dd=_c(model.joint_dd),
+        joint_rheology=_c(model.joint_rheology, np.bool_),
+        joint_axis=_c(model.joint_axis),
+        joint_swing=_c(model.joint_swing),
+        joint_twist_lo=_c(model.joint_twist_lo),
+        joint_twist_hi=_c(model.joint_twist_hi),
+        joint_yield=_c(model.joint_yield),
+        joint_plastic=_c(plastic, np.bool_),
+        joint_finite_yield=_c(np.isfinite(model.joint_yield), np.bool_),
+        body_mass=_c(model.body_mass),
+        body_inv_mass=_c(model.body_inv_mass),
+        body_inertia=_c(model.body_inertia),
+        body_inv_inertia=_c(model.body_inv_inertia),
+        body_island=_c(body_islands(model), np.int64),
+        joint_levers=_c(model_levers(model)),
+        joint_limit_thresholds=_c(
             limit_thresholds(
                 model.joint_swing,
                 model.joint_twist_lo,
@@ -140,99 +142,67 @@ def pack(model: Model) -> FastModel:
     g, ncontact, reason = _geometry(model)
     tree, ptree = _forest(model)
     o = model.options
-    opt = _c(
-        [
-            o.h,
-            o.joint_erp,
-            o.contact_erp,
-            o.contact_slop,
-            o.contact_margin,
-            o.limit_margin,
-            o.regularization,
-            o.yield_filter_time,
-            o.max_speed,
-            o.max_angular_speed,
-            o.max_joint_gap,
-            o.warm_start_factor,
-            *o.gravity,
-            o.sleep_speed,
-            o.sleep_spin,
-            o.sleep_time,
-        ]
-    )
-    iopt = _c(
-        [
-            METHODS.get(o.method, -1),
-            o.iterations,
-            o.warm_start,
-            bool(model.joint_rheology.any()),
-            model.has_limits,
-            model.has_collision,
-            o.max_substeps,
-            0,
-            o.cull_pairs,
-            o.dormant_rows,
-            o.sleep,
-        ],
-        np.int64,
-    )
+    opt = np.zeros(Opt.SIZE)
+    for entry, at in Opt.__members__.items():
+        if entry != "SIZE":
+            opt[at : at + np.size(getattr(o, entry))] = getattr(o, entry)
+    iopt = np.zeros(IOpt.SIZE, np.int64)
+    iopt[IOpt.method] = METHODS.get(o.method, -1)
+    iopt[IOpt.has_rheology] = bool(model.joint_rheology.any())
+    iopt[IOpt.has_limits], iopt[IOpt.has_collision] = model.has_limits, model.has_collision
+    options = ("iterations", "warm_start", "max_substeps", "cull_pairs", "dormant_rows", "sleep")
+    for entry in options:
+        iopt[IOpt[entry]] = getattr(o, entry)
     if o.method not in METHODS:
         reason = f"solver method '{o.method}' is not compiled"
     nrows = 9 * nj + 3 * ncontact + 6
     ns = len(model.geometry.shape_body)
-    ws = (
-        _rows(nrows),
-        np.zeros((nrows, 6)),
-        np.zeros((nrows, 6)),
-        np.zeros(nrows, np.int64),
-        _contacts(ncontact),
-        np.zeros((nb, 3, 3)),
-        np.zeros((nb, 3, 3)),
-        np.zeros((nb, 3, 3)),
-        np.zeros((ns, 3)),
-        np.zeros((ns, 3, 3)),
-        np.zeros(len(STAGES), np.int64),
+    ws = Workspace(
+        rows=_rows(nrows),
+        resp_a=np.zeros((nrows, 6)),
+        resp_b=np.zeros((nrows, 6)),
+        rheo_joint=np.zeros(nrows, np.int64),
+        contacts=_contacts(ncontact),
+        rot=np.zeros((nb, 3, 3)),
+        inv_inertia=np.zeros((nb, 3, 3)),
+        inertia=np.zeros((nb, 3, 3)),
+        shape_centre=np.zeros((ns, 3)),
+        shape_rot=np.zeros((ns, 3, 3)),
+        cycles=np.zeros(len(STAGES), np.int64),
     )
-    pws = (
-        _rows(3 * nj),
-        np.zeros((3 * nj, 6)),
-        np.zeros((3 * nj, 6)),
-        np.zeros((nb, 3, 3)),
-        np.zeros((nb, 3, 3)),
-        np.zeros((nb, 3, 3)),
-        np.zeros(3 * nj),
+    pws = ProjectionWorkspace(
+        rows=_rows(3 * nj),
+        resp_a=np.zeros((3 * nj, 6)),
+        resp_b=np.zeros((3 * nj, 6)),
+        rot=np.zeros((nb, 3, 3)),
+        inv_inertia=np.zeros((nb, 3, 3)),
+        inertia=np.zeros((nb, 3, 3)),
+        lam=np.zeros(3 * nj),
     )
-    flat, views = flatten((m, g, tree, ptree, ws, pws, opt, iopt))
-    return FastModel(*views, flat, np.zeros((nb, 3)), reason, model)
+    flat, views = flatten(Packed(m, g, tree, ptree, ws, pws, opt, iopt))
+    return FastModel(views, flat, np.zeros((nb, 3)), reason, model)
 
 
-def _rows(n: int) -> tuple:
-    """An empty row table for n rows (layout of solver.rows.table_kernel.set_row)."""
-    i, f = np.zeros(n, np.int64), np.zeros(n)
-    return (
-        i,
-        i.copy(),
-        np.zeros((n, 6)),
-        np.zeros((n, 6)),
-        f,
-        f.copy(),
-        f.copy(),
-        f.copy(),
-        i.copy(),
-        f.copy(),
-        i.copy(),
-        i.copy(),
-    )
+def _rows(n: int) -> Rows:
+    """An empty row table for n rows."""
+    kinds = dict(zip(Rows._fields, Rows.KINDS, strict=True))
+    return Rows(**{name: _empty(kind, n) for name, kind in kinds.items()})
 
 
-def _contacts(n: int) -> tuple:
-    """Contact buffers: body_a, body_b, point, normal, depth, friction, key."""
-    i = np.zeros(n, np.int64)
-    return (i, i.copy(), np.zeros((n, 3)), np.zeros((n, 3)), np.zeros(n), np.zeros(n), i.copy())
+def _contacts(n: int) -> Contacts:
+    """Empty contact buffers for n contacts."""
+    kinds = dict(zip(Contacts._fields, Contacts.KINDS, strict=True))
+    return Contacts(**{name: _empty(kind, n) for name, kind in kinds.items()})
 
 
-def _geometry(model: Model) -> tuple[tuple, int, str | None]:
-    """(g tuple, most contacts a step can produce, reason it is unsupported or None)."""
+def _empty(kind: str, n: int) -> np.ndarray:
+    """n zero rows of a leaf kind (layout.BUFFERS)."""
+    dtype, trail = BUFFERS[kind]
+    return np.zeros((n, *trail), dtype)
+
+
+def _geometry(model: Model) -> tuple[Geometry, int, str | None]:
+    """(Geometry, most contacts a step can produce, reason it is unsupported or None)."""
     geo = model.geometry
     kind, body = geo.shape_kind, geo.shape_body
     cls = _CLASS[kind]
@@ -253,29 +223,29 @@ def _geometry(model: Model) -> tuple[tuple, int, str | None]:
     )
     mu = geo.shape_friction
     touchable = np.flatnonzero(body >= 0)
-    g = (
-        _c(body, np.int64),
-        _c(geo.shape_pos),
-        _c(geo.shape_quat),
-        _c(kind, np.int64),
-        _c(geo.shape_radius),
-        _c(geo.shape_half),
-        _c(bound),
-        _c(f, np.int64),
-        _c(s, np.int64),
-        group,
-        _c(np.where(swap, -1.0, 1.0)),
-        _c(body[a], np.int64),
-        _c(body[b], np.int64),
-        _c(np.sqrt(mu[a] * mu[b])),
-        _c(touchable, np.int64),
-        _c(np.sqrt(0.5 * mu[touchable])),
+    g = Geometry(
+        shape_body=_c(body, np.int64),
+        shape_pos=_c(geo.shape_pos),
+        shape_quat=_c(geo.shape_quat),
+        shape_kind=_c(kind, np.int64),
+        shape_radius=_c(geo.shape_radius),
+        shape_half=_c(geo.shape_half),
+        shape_bound=_c(bound),
+        pair_first=_c(f, np.int64),
+        pair_second=_c(s, np.int64),
+        pair_group=group,
+        pair_sign=_c(np.where(swap, -1.0, 1.0)),
+        pair_body_a=_c(body[a], np.int64),
+        pair_body_b=_c(body[b], np.int64),
+        pair_friction=_c(np.sqrt(mu[a] * mu[b])),
+        touchable=_c(touchable, np.int64),
+        touch_friction=_c(np.sqrt(0.5 * mu[touchable])),
     )
     most = sum(FEATURES[k] for k in group if k >= 0) + 3 * len(touchable)
     return g, most, reason
 
 
-def _forest(model: Model) -> tuple[tuple, tuple]:
+def _forest(model: Model) -> tuple[Tree, ProjectionTree]:
     """Elimination forest of bodies and joints (solver.solve.direct_kernel), children first.
 
     Nodes: body b (movable only), joint j as nb + j, the grip as nb + nj (placed first
@@ -313,8 +283,8 @@ def _forest(model: Model) -> tuple[tuple, tuple]:
     rank = np.cumsum(model.joint_rheology) - 1
     rheo_start = np.where(model.joint_rheology, 3 * nj + 3 * rank, -1).astype(np.int64)
     nn = nb + nj + 1
-    tw = (np.zeros((nn, 6, 6)), np.zeros((nn, 6, 6)), np.zeros((nn, 6)), np.zeros((6, 6)))
+    tw = TreeWork(np.zeros((nn, 6, 6)), np.zeros((nn, 6, 6)), np.zeros((nn, 6)), np.zeros((6, 6)))
     order_arr, no_rheo = np.array(order, np.int64), np.full(nj, -1, np.int64)
     rows, size = np.zeros((nn, 6), np.int64), np.zeros(nn, np.int64)
-    tree = (order_arr, parent, rheo_start, no_rheo, np.zeros(nn, np.int64), rows, size, tw)
-    return tree, (order_arr, parent, no_rheo, rows, size, tw)
+    tree = Tree(order_arr, parent, rheo_start, no_rheo, np.zeros(nn, np.int64), rows, size, tw)
+    return tree, ProjectionTree(order_arr, parent, no_rheo, rows, size, tw)

@@ -26,10 +26,19 @@ from __future__ import annotations
 
 import numpy as np
 
-from solver.compiled.entry import SIM_SCHEMA, inplace_kernel
+from solver.compiled.entry import inplace_kernel
 from solver.compiled.fast import _NO_INPUT, _input_arrays, entry_point, fast_step, kernel_report
 from solver.compiled.flat import flatten
 from solver.compiled.kernel import step_arrays
+from solver.compiled.layout import (
+    Pointer,
+    ReportFloat,
+    ReportInt,
+    SimArrays,
+    StateSet,
+    StepWork,
+    Warm,
+)
 from solver.compiled.pack import FastModel
 from solver.rows.grip import follow_steps, path_input
 from solver.solve.dispatch_kernel import OK
@@ -46,7 +55,7 @@ _KERNEL = entry_point(inplace_kernel)
 class Sim:
     """One model's simulation, stepped in place (module docstring).  One thread at a time.
 
-    Its arrays are views of one set of flat buffers (solver.compiled.entry.SIM_SCHEMA),
+    Its arrays are views of one set of flat buffers (solver.compiled.layout.SimArrays),
     passed to the step whole: its own copy of the packed model and its workspaces, two
     sets of state arrays (``_FIELDS``; a step reads set ``_phase`` and writes the other,
     since it must not overwrite what it still reads and a step handed back to fast_step
@@ -57,23 +66,24 @@ class Sim:
         when None)."""
         self.model = model = fm.model
         self._fm = fm
-        rest, nb, rows = initial_state(model), len(fm.zeros), len(fm.ws[0][0])
-        sets = tuple(tuple(np.zeros_like(_field(rest, f, nb)) for f in _FIELDS) for _ in range(2))
-        warm = (np.zeros(rows, np.int64), np.zeros(rows), np.zeros(1, np.int64))
-        packed = (fm.m, fm.g, fm.tree, fm.ptree, fm.ws, fm.pws, fm.opt, fm.iopt)
-        scratch = step_arrays(nb, len(fm.m[0]), rows, len(fm.tree[1]))
-        parts = (*packed, *sets, warm, np.zeros(4, np.int64), np.zeros(10), scratch)
-        self._flat, views = flatten(parts, SIM_SCHEMA)
-        self._sets, self._warm, self._rep_i, self._rep_f = views[8:10], *views[10:13]
+        rest, nb, rows = initial_state(model), len(fm.zeros), len(fm.ws.rows.body_a)
+        sets = [StateSet(*(np.zeros_like(_field(rest, f, nb)) for f in _FIELDS)) for _ in range(2)]
+        warm = Warm(np.zeros(rows, np.int64), np.zeros(rows), np.zeros(1, np.int64))
+        work = StepWork(*step_arrays(nb, len(fm.m.joint_parent), rows, len(fm.tree.parent)))
+        arrays = SimArrays(fm.packed, *sets, warm, np.zeros(ReportInt.SIZE, np.int64),
+                           np.zeros(ReportFloat.SIZE), work)  # fmt: skip
+        self._flat, views = flatten(arrays)
+        self._sets, self._warm = (views.set0, views.set1), views.warm
+        self._rep_i, self._rep_f = views.rep_i, views.rep_f
         self.load(rest if state is None else state)
 
     def load(self, state: State) -> None:
         """Make ``state`` the current state (copied)."""
-        nb, nj = len(self._fm.zeros), len(self._fm.m[0])
+        nb, nj = len(self._fm.zeros), len(self._fm.m.joint_parent)
         current = tuple(_field(state, f, nb) for f in _FIELDS)
         if [a.shape for a in current] != [a.shape for a in self._sets[0]]:  # the step trusts these
             raise ValueError(f"Sim.load: not a state of this model ({nb} bodies, {nj} joints)")
-        keys, lam, count = self._warm
+        keys, lam, count = self._warm.keys, self._warm.lam, self._warm.n
         n = len(state.warm_key)
         if n > len(keys):  # more rows than this model can make
             raise ValueError(f"Sim.load: not a state of this model ({n} warm rows)")
@@ -87,22 +97,22 @@ class Sim:
     @property
     def state(self) -> State:
         """The current state, as a State of its own arrays."""
-        n = int(self._warm[2][0])
+        n = int(self._warm.n[0])
         current = self._sets[self._phase]
         arrays = {f: a.copy() for f, a in zip(_FIELDS, current, strict=True)}
         return State(
-            time=self.time, step=self.steps, warm_key=self._warm[0][:n].copy(),
-            warm_lam=self._warm[1][:n].copy(), **arrays,
+            time=self.time, step=self.steps, warm_key=self._warm.keys[:n].copy(),
+            warm_lam=self._warm.lam[:n].copy(), **arrays,
         )  # fmt: skip
 
     def view(self) -> State:
         """The current state over this stepper's own arrays, not copied: for reading
         before the next step (which overwrites them); ``state`` is the copy to keep."""
-        n = int(self._warm[2][0])
+        n = int(self._warm.n[0])
         arrays = dict(zip(_FIELDS, self._sets[self._phase], strict=True))
         return State(
-            time=self.time, step=self.steps, warm_key=self._warm[0][:n],
-            warm_lam=self._warm[1][:n], **arrays,
+            time=self.time, step=self.steps, warm_key=self._warm.keys[:n],
+            warm_lam=self._warm.lam[:n], **arrays,
         )  # fmt: skip
 
     def wrench(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -111,13 +121,14 @@ class Sim:
         if self._handed_back is not None:
             r = self._handed_back
             return r.grip_force, r.grip_torque, r.touch_force
-        f = self._rep_f
-        return f[1:4], f[4:7], f[7:10]
+        f, at = self._rep_f, ReportFloat
+        return (f[at.grip_force : at.grip_torque], f[at.grip_torque : at.touch_force],
+                f[at.touch_force : at.SIZE])  # fmt: skip
 
     def wrench_into(self, out: np.ndarray) -> None:
         """Write the last step's (grip force, grip torque, touch force) into out (9,)."""
         if self._handed_back is None:
-            out[:] = self._rep_f[1:10]
+            out[:] = self._rep_f[ReportFloat.grip_force :]
         else:
             out[:] = np.concatenate(self.wrench())
 
@@ -151,13 +162,13 @@ class Sim:
         )
         if ins is None:
             return follow_steps(self, path, radius, coupling, wrench)
-        kernel, flat, rep, pvec = _KERNEL[0], self._flat, self._rep_f, fm.pvec[:13]
+        kernel, flat, rep, pvec = _KERNEL[0], self._flat, self._rep_f, fm.pvec[: Pointer.radius]
         poses = np.concatenate(path, axis=1)  # each row as the kernel's pointer vector
         for k in range(n):
             pvec[:] = poses[k]
             if kernel(flat, self._phase, ins)[0] == OK:
                 self._stepped()
-                wrench[k] = rep[1:10]
+                wrench[k] = rep[ReportFloat.grip_force :]
             else:
                 self._hand_back(path_input(path, k, radius, coupling))
                 self.wrench_into(wrench[k])
@@ -188,7 +199,7 @@ class Sim:
         """The last step's contact count (StepReport.contacts), without the report."""
         if self._handed_back is not None:
             return self._handed_back.contacts
-        return int(self._rep_i[1])
+        return int(self._rep_i[ReportInt.contacts])
 
     @property
     def substeps(self) -> int:

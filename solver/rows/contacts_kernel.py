@@ -46,8 +46,8 @@ def contact_rows(cb, c0, c1, pos, vel_free, u, h, erp, slop, rw, n):
     """Normal rows of contacts c0..c1−1, then their friction pairs; u: static side's velocity."""
     first = n
     for i in range(c0, c1):
-        a, b = cb[0][i], cb[1][i]
-        point, normal, d = vec(cb[2], i), vec(cb[3], i), cb[4][i]
+        a, b = cb.body_a[i], cb.body_b[i]
+        point, normal, d = vec(cb.point, i), vec(cb.normal, i), cb.depth[i]
         r_a = sub(point, vec(pos, a)) if a >= 0 else point
         r_b = sub(point, vec(pos, b)) if b >= 0 else point
         bias = -d / h if d < 0.0 else -erp * max(d - slop, 0.0) / h
@@ -56,7 +56,7 @@ def contact_rows(cb, c0, c1, pos, vel_free, u, h, erp, slop, rw, n):
             rw,
             n,
             KIND_CONTACT,
-            cb[6][i],
+            cb.key[i],
             a,
             b,
             ja,
@@ -70,8 +70,8 @@ def contact_rows(cb, c0, c1, pos, vel_free, u, h, erp, slop, rw, n):
         )
         n += 1
     for i in range(c0, c1):
-        a, b = cb[0][i], cb[1][i]
-        point, normal = vec(cb[2], i), vec(cb[3], i)
+        a, b = cb.body_a[i], cb.body_b[i]
+        point, normal = vec(cb.point, i), vec(cb.normal, i)
         r_a = sub(point, vec(pos, a)) if a >= 0 else point
         r_b = sub(point, vec(pos, b)) if b >= 0 else point
         slip = sub(sub(_point_velocity(vel_free, b, r_b), _point_velocity(vel_free, a, r_a)), u)
@@ -82,7 +82,7 @@ def contact_rows(cb, c0, c1, pos, vel_free, u, h, erp, slop, rw, n):
                 rw,
                 n,
                 KIND_FRICTION,
-                2 * cb[6][i] + k,
+                2 * cb.key[i] + k,
                 a,
                 b,
                 ja,
@@ -92,7 +92,7 @@ def contact_rows(cb, c0, c1, pos, vel_free, u, h, erp, slop, rw, n):
                 0.0,
                 -dot(tangents[k], u),
                 first + i - c0,
-                cb[5][i],
+                cb.friction[i],
             )
             n += 1
     return n

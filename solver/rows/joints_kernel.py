@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 
+from solver.compiled.layout import Limits
 from solver.jit import kernel
 from solver.kin_kernel import (
     add,
@@ -45,7 +46,9 @@ def anchor_rows(joints, pos, rot, omega, h, erp, arc, asleep, rw, n):
     rot (nb,3,3) body rotations; omega (nb,3) the angular velocities of the arc terms
     (the last step's solved ones, as solver.pipeline); arc=False drops the arc terms (the
     projection's rows); asleep (nb,) bool: joints of sleeping bodies get empty rows."""
-    parent, bone, anc_p, anc_c = joints  # m[0], m[1], m[2], m[3]
+    parent, bone, anc_p, anc_c = (
+        joints  # m.joint_parent, m.joint_bone, m.joint_anchor_parent, m.joint_anchor_child
+    )
     for j in range(len(parent)):
         p, c = parent[j], bone[j]
         if asleep[c]:
@@ -151,9 +154,17 @@ def _wrap(x):
 
 @kernel(error_model="numpy", inline="always")
 def limit_arrays(m):
-    """What ``limit_rows`` reads of the model: joint parents, bones, rest axes, swing and
-    twist limits, thresholds (m[0], m[1], m[8]–m[11], m[21])."""
-    return (m[0], m[1], m[8], m[9], m[10], m[11], m[21])
+    """What ``limit_rows`` reads of the model (layout.Limits): joint parents, bones, rest
+    axes, swing and twist limits, thresholds."""
+    return Limits(
+        m.joint_parent,
+        m.joint_bone,
+        m.joint_axis,
+        m.joint_swing,
+        m.joint_twist_lo,
+        m.joint_twist_hi,
+        m.joint_limit_thresholds,
+    )
 
 
 @kernel(error_model="numpy", _nrt=False)
@@ -165,7 +176,7 @@ def limit_rows(limits, quat, rot, h, erp, margin, asleep, rw, n, gaps, turned):
     Joints of sleeping bodies (asleep) have none.  Each joint's C and d' are computed
     once (``limit_gaps``, into the scratch arrays gaps and turned (nj, 3)), the rows
     then made in their order."""
-    parent, bone, axis_rest = limits[0], limits[1], limits[2]
+    parent, bone, axis_rest = limits.parent, limits.bone, limits.axis
     limit_gaps(limits, quat, asleep, gaps, turned)
     for slot in range(3):
         for j in range(len(parent)):

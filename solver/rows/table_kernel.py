@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 
+from solver.compiled.layout import Rows
 from solver.jit import kernel
 from solver.kin_kernel import (
     cross,
@@ -24,32 +25,30 @@ ZERO = (0.0, 0.0, 0.0)
 AXES = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
 
 
-def row_arrays(rows) -> tuple:
-    """A ``solver.rows.table.Rows`` table as the tuple the kernels take (``rw``), in field order."""
-    return (
-        rows.body_a, rows.body_b, rows.jac_a, rows.jac_b, rows.lo, rows.hi, rows.comp,
-        rows.bias, rows.fric_of, rows.mu, rows.key, rows.kind.astype(np.int64),
-    )  # fmt: skip
+def row_arrays(rows) -> Rows:
+    """A ``solver.rows.table.Rows`` table as the kernels take it (``rw``, layout.Rows)."""
+    fields = {name: getattr(rows, name) for name in Rows._fields}
+    return Rows(**fields | {"kind": rows.kind.astype(np.int64)})
 
 
 @kernel(error_model="numpy")
 def set_row(rw, i, kind, ident, a, b, ja, jb, lo, hi, comp, bias, fric_of, mu):
     """Row i; ja, jb = (linear, angular) 3-tuple pairs of the Jacobian blocks."""
-    rw[0][i] = a
-    rw[1][i] = b
+    rw.body_a[i] = a
+    rw.body_b[i] = b
     for k in range(3):
-        rw[2][i, k] = ja[0][k]
-        rw[2][i, 3 + k] = ja[1][k]
-        rw[3][i, k] = jb[0][k]
-        rw[3][i, 3 + k] = jb[1][k]
-    rw[4][i] = lo
-    rw[5][i] = hi
-    rw[6][i] = comp
-    rw[7][i] = bias
-    rw[8][i] = fric_of
-    rw[9][i] = mu
-    rw[10][i] = (kind << KEY_SHIFT) + ident
-    rw[11][i] = kind
+        rw.jac_a[i, k] = ja[0][k]
+        rw.jac_a[i, 3 + k] = ja[1][k]
+        rw.jac_b[i, k] = jb[0][k]
+        rw.jac_b[i, 3 + k] = jb[1][k]
+    rw.lo[i] = lo
+    rw.hi[i] = hi
+    rw.comp[i] = comp
+    rw.bias[i] = bias
+    rw.fric_of[i] = fric_of
+    rw.mu[i] = mu
+    rw.key[i] = (kind << KEY_SHIFT) + ident
+    rw.kind[i] = kind
 
 
 @kernel(error_model="numpy")
@@ -79,4 +78,4 @@ def null_rows(rw, n, kind, j, count):
 def is_null(rw, i):
     """Row i is an empty slot (null_rows).  Not ``and``: an array read from a tuple in an
     and/or costs two uncancelled reference counts (~300 ns a call, numba 0.68)."""
-    return (rw[0][i] < 0) & (rw[1][i] < 0)
+    return (rw.body_a[i] < 0) & (rw.body_b[i] < 0)

@@ -9,13 +9,15 @@ a least-squares fallback for degenerate input.
 from __future__ import annotations
 
 import numpy as np
-import scipy.linalg
 
 from solver.rows.table import Rows
 from solver.solve.response import dense_system
 
 
-def _solve_spd(q: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+def solve_spd(q: np.ndarray, rhs: np.ndarray) -> np.ndarray:
+    """Q⁻¹ rhs for a symmetric positive definite Q (least squares if it is not)."""
+    import scipy.linalg  # on use: the compiled step never needs it, and it costs ~0.3 s to import
+
     try:
         return scipy.linalg.cho_solve(scipy.linalg.cho_factor(q), rhs)
     except np.linalg.LinAlgError:
@@ -58,5 +60,5 @@ def _solve_with_pinned(
     free = np.flatnonzero(~pinned)
     if len(free):
         rhs = -(c[free] + q[np.ix_(free, np.flatnonzero(pinned))] @ lam[pinned])
-        lam[free] = _solve_spd(q[np.ix_(free, free)], rhs)
+        lam[free] = solve_spd(q[np.ix_(free, free)], rhs)
     return lam

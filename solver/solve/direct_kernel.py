@@ -146,14 +146,14 @@ def _backward_block(dm, i, m, x):
 @kernel(error_model="numpy")
 def row_velocity(rw, r, vel):
     """J_r v (static sides skipped)."""
-    a, b = rw[0][r], rw[1][r]
+    a, b = rw.body_a[r], rw.body_b[r]
     w = 0.0
     if a >= 0:
         for k in range(6):
-            w += rw[2][r, k] * vel[a, k]
+            w += rw.jac_a[r, k] * vel[a, k]
     if b >= 0:
         for k in range(6):
-            w += rw[3][r, k] * vel[b, k]
+            w += rw.jac_b[r, k] * vel[b, k]
     return w
 
 
@@ -191,7 +191,7 @@ def init_nodes(seq, nseq, nb, rw, vel_free, h, mass, inertia_w, rows, size, dm, 
         for r in range(m):
             for c in range(m):
                 dm[i, r, c] = 0.0
-            dm[i, r, r] = -rw[6][rows[i, r]]
+            dm[i, r, r] = -rw.comp[rows[i, r]]
     init_rhs(seq, nseq, nb, rw, vel_free, rows, size, z)
 
 
@@ -205,7 +205,7 @@ def init_rhs(seq, nseq, nb, rw, vel_free, rows, size, z):
         if i >= nb:
             for k in range(size[i]):
                 r = rows[i, k]
-                z[i, k] = row_velocity(rw, r, vel_free) + rw[7][r]
+                z[i, k] = row_velocity(rw, r, vel_free) + rw.bias[r]
 
 
 @kernel(error_model="numpy")
@@ -213,7 +213,7 @@ def _coupling(i, p, nb, rw, rows, size, g):
     """g = K_ip = −J block between body node and row node (transposed when i is the body)."""
     body_is_p = i >= nb
     row_node = i if body_is_p else p
-    body, body_a, jac_a, jac_b = p if body_is_p else i, rw[0], rw[2], rw[3]
+    body, body_a, jac_a, jac_b = p if body_is_p else i, rw.body_a, rw.jac_a, rw.jac_b
     for k in range(size[row_node]):
         r = rows[row_node, k]
         on_a = body_a[r] == body
@@ -259,12 +259,12 @@ def _upper_left_zero(g):
 def tree_factor(seq, nseq, parent, nb, rw, rows, size, tw):
     """Factor the forest's system in place, children first (module docstring): each
     D_i = ±L Δ Lᵀ, Y_i = L⁻¹ K_ip, D_p −= ±Y_iᵀ Δ⁻¹ Y_i; in the same pass, the forward half of
-    the substitution of the right-hand sides in tw[2] (init_nodes made them): node by node
+    the substitution of the right-hand sides in tw.rhs (init_nodes made them): node by node
     its L⁻¹ z_i and the fold into its parent, the operations of ``forward_pass`` in its
     order (so its result bitwise), while the node's factors are fresh; ``backward_pass``
     then solves.  False when a block is not definite (degenerate rows: the caller falls
     back)."""
-    dm, y, x, g = tw[0], tw[1], tw[2], tw[3]
+    dm, y, x, g = tw.block, tw.coupling, tw.rhs, tw.gather
     for q in range(nseq):
         i = seq[q]
         m = size[i]
@@ -341,7 +341,7 @@ def tree_substitute(seq, nseq, parent, nb, size, tw, x, fwd, fwd_tag, bwd, bwd_t
 @kernel(error_model="numpy", inline="always")
 def forward_pass(seq, nseq, parent, nb, size, tw, x, fwd, fwd_tag):
     """L⁻¹ z_i, children first, folded into the parent (``tree_substitute``)."""
-    dm, y = tw[0], tw[1]
+    dm, y = tw.block, tw.coupling
     for q in range(nseq):
         i = seq[q]
         if fwd_tag != ALL and fwd[i] != fwd_tag:
@@ -356,7 +356,7 @@ def forward_pass(seq, nseq, parent, nb, size, tw, x, fwd, fwd_tag):
 @kernel(error_model="numpy", _nrt=False)
 def backward_pass(seq, nseq, parent, nb, size, tw, x, bwd, bwd_tag):
     """x_i = sign·L⁻ᵀ Δ⁻¹ (L⁻¹ z_i − Y x_p), parents first (``tree_substitute``)."""
-    dm, y = tw[0], tw[1]
+    dm, y = tw.block, tw.coupling
     for q in range(nseq - 1, -1, -1):
         i = seq[q]
         if bwd_tag != ALL and bwd[i] != bwd_tag:
@@ -408,8 +408,8 @@ def tree_solve(seq, nseq, parent, nb, rw, vel_free, h, mass, inertia_w, rows, si
     seq[:nseq]: nodes, children before parents; parent: node → parent node or −1;
     rows/size: each row node's rows; tw = (D, Y, w, g) workspaces.  False when a
     block is not definite (degenerate rows: the caller falls back)."""
-    w = tw[2]
-    init_nodes(seq, nseq, nb, rw, vel_free, h, mass, inertia_w, rows, size, tw[0], w)
+    w = tw.rhs
+    init_nodes(seq, nseq, nb, rw, vel_free, h, mass, inertia_w, rows, size, tw.block, w)
     if not tree_factor(seq, nseq, parent, nb, rw, rows, size, tw):  # (and the forward pass)
         return False
     backward_pass(seq, nseq, parent, nb, size, tw, w, parent, ALL)
@@ -433,7 +433,7 @@ def _dot6(x, i, y, j):
 def dense_solve(rw, resp_a, resp_b, n, vel_free, lam):
     """λ = −Q⁻¹(J v_free + β), Q = A + diag(C), A_ij = jac_i·resp_j over shared bodies."""
     q = np.zeros((n, n))
-    a, b, ja, jb = rw[0], rw[1], rw[2], rw[3]
+    a, b, ja, jb = rw.body_a, rw.body_b, rw.jac_a, rw.jac_b
     for i in range(n):
         for j in range(i + 1):
             s = 0.0
@@ -446,8 +446,8 @@ def dense_solve(rw, resp_a, resp_b, n, vel_free, lam):
             if b[i] >= 0 and b[i] == b[j]:
                 s += _dot6(jb, i, resp_b, j)
             q[i, j] = s
-        q[i, i] += rw[6][i]
-        lam[i] = -(row_velocity(rw, i, vel_free) + rw[7][i])
+        q[i, i] += rw.comp[i]
+        lam[i] = -(row_velocity(rw, i, vel_free) + rw.bias[i])
     if not chol(q, n):
         return False
     chol_solve(q, n, lam)

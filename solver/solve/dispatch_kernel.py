@@ -8,6 +8,7 @@ import inspect
 
 import numpy as np
 
+from solver.compiled.layout import IOpt, Opt
 from solver.jit import kernel
 from solver.rows.table import KIND_GRIP, KIND_RHEOLOGY
 from solver.rows.table_kernel import is_null
@@ -34,13 +35,13 @@ def regularize(rw, n, inv_mass, inv_i, h, eps):
     if eps <= 0.0:
         return
     for i in range(n):
-        if not rw[6][i] > 0.0:
+        if not rw.comp[i] > 0.0:
             d = 0.0
-            ra = row_response(rw[0], rw[2], i, inv_mass, inv_i, h)
-            rb = row_response(rw[1], rw[3], i, inv_mass, inv_i, h)
+            ra = row_response(rw.body_a, rw.jac_a, i, inv_mass, inv_i, h)
+            rb = row_response(rw.body_b, rw.jac_b, i, inv_mass, inv_i, h)
             for k in range(6):
-                d += rw[2][i, k] * ra[k] + rw[3][i, k] * rb[k]
-            rw[6][i] = eps * d
+                d += rw.jac_a[i, k] * ra[k] + rw.jac_b[i, k] * rb[k]
+            rw.comp[i] = eps * d
 
 
 @kernel(error_model="numpy", inline="always")
@@ -48,8 +49,9 @@ def warm_start(opt, iopt, warm, rw, n, lam):
     """lam[:n] ← last step's λ of rows with the same key × factor (``_warm_fill``), 0 for
     the others."""
     lam[:n] = 0.0
-    if iopt[2] and len(warm[0]) > 0:
-        _warm_fill(opt[11], warm[0], warm[1], rw[10], n, lam)
+    keys, values = warm
+    if iopt[IOpt.warm_start] and len(keys) > 0:
+        _warm_fill(opt[Opt.warm_start_factor], keys, values, rw.key, n, lam)
 
 
 @kernel(error_model="numpy", _nrt=False)
@@ -82,7 +84,7 @@ def direct(bw, tree, h, rw, n, ne, vel_free, lam0, grip, asleep, sv, lam, vel):
     settled; 1: not settled (λ clipped, PGS finishes); 2: degenerate, or a row that is
     neither (fall back)."""
     for i in range(ne, n):
-        if rw[11][i] != KIND_GRIP:
+        if rw.kind[i] != KIND_GRIP:
             return 2, 0.0
     code, _, _ = hybrid_solve(
         bw, tree, h, rw, n, ne, vel_free, lam0, 0, grip, False, asleep, sv, lam, vel,
@@ -90,61 +92,68 @@ def direct(bw, tree, h, rw, n, ne, vel_free, lam0, grip, asleep, sv, lam, vel):
     )  # fmt: skip
     if code != 0:
         return code, 0.0
-    at_lo, at_hi = sv[0][0], sv[0][1]
+    at_lo, at_hi = sv.flags.at_lo, sv.flags.at_hi
     residual = 0.0
     for i in range(n):
         if not (at_lo[i] or at_hi[i]):
-            residual = max(residual, abs(row_velocity(rw, i, vel) + rw[6][i] * lam[i] + rw[7][i]))
+            residual = max(
+                residual, abs(row_velocity(rw, i, vel) + rw.comp[i] * lam[i] + rw.bias[i])
+            )
     return 0, residual
 
 
 @kernel(error_model="numpy", inline="always")
 def solve(bw, tree, rw, opt, iopt, warm, n, vel_free, grip, asleep, sv, lam0, lam, vel):
     """(status, iterations, residual, solver) as solver.solve.dispatch.solve; λ into lam[:n], the
-    velocities into vel.  The row responses (bw[3], bw[4]) are made here, for the rows
+    velocities into vel.  The row responses (bw.resp_a, bw.resp_b) are made here, for the rows
     the solver reads: only the rows after the joints' for the hybrid and direct solves,
     whose joint rows the tree solves from their Jacobians, all of them for PGS (and for
     the PGS that finishes a direct solve whose active set did not settle).
 
     bw: the model arrays the solvers read (joint_bone, mass, inverse mass, row responses
-    a and b, world inverse inertia, world inertia: m[1], m[15], m[16], ws[1], ws[2],
-    ws[6], ws[7]); warm: the last step's (keys, λ); lam0 (≥ n): the warm start, made
-    here; sv: the solvers' scratch arrays (step_arrays), so none of them allocates."""
-    lo, hi, fric, kind = rw[4], rw[5], rw[8], rw[11]
+    a and b, world inverse inertia, world inertia: layout.Bodies); warm: the last step's
+    (keys, λ); lam0 (≥ n): the warm start, made here; sv: the solvers' scratch arrays
+    (layout.SolverScratch), so none of them allocates."""
+    lo, hi, fric, kind = rw.lo, rw.hi, rw.fric_of, rw.kind
     bilateral = True
     for i in range(n):
         if not (lo[i] < 0.0 and hi[i] > 0.0 and fric[i] < 0):
             bilateral = False
-    method = iopt[0]
+    method = iopt[IOpt.method]
     hybrid = method == METHOD_HYBRID or (method == METHOD_AUTO and not bilateral)
     exact = method == METHOD_DIRECT or (method == METHOD_AUTO and bilateral)
     ne = 0
     while (hybrid or exact) and ne < n and kind[ne] <= KIND_RHEOLOGY:
         ne += 1
-    response(rw, ne, n, bw[2], bw[5], opt[0], bw[3], bw[4])  # (the tree needs none)
+    response(
+        rw, ne, n, bw.inv_mass, bw.inv_inertia, opt[Opt.h], bw.resp_a, bw.resp_b
+    )  # (the tree needs none)
     warm_start(opt, iopt, warm, rw, n, lam0)
     if exact:
         if not bilateral:
             return FALLBACK, 0, 0.0, SOLVER_DIRECT
         code, residual = direct(
-            bw, tree, opt[0], rw, n, ne, vel_free, lam0, grip, asleep, sv, lam, vel
+            bw, tree, opt[Opt.h], rw, n, ne, vel_free, lam0, grip, asleep, sv, lam, vel
         )
         if code == 2:
             return FALLBACK, 0, 0.0, SOLVER_DIRECT
         if code == 0:
             return OK, 1, residual, SOLVER_DIRECT
-        response(rw, 0, ne, bw[2], bw[5], opt[0], bw[3], bw[4])  # PGS reads every row's
+        response(
+            rw, 0, ne, bw.inv_mass, bw.inv_inertia, opt[Opt.h], bw.resp_a, bw.resp_b
+        )  # PGS reads every row's
         for i in range(n):
             lam0[i] = lam[i]
     if hybrid:
         code, sweeps, residual = hybrid_solve(
-            bw, tree, opt[0], rw, n, ne, vel_free, lam0, iopt[1], grip, iopt[9], asleep, sv, lam,
-            vel, ROUNDS,
+            bw, tree, opt[Opt.h], rw, n, ne, vel_free, lam0, iopt[IOpt.iterations], grip,
+            iopt[IOpt.dormant_rows], asleep, sv, lam, vel, ROUNDS,
         )  # fmt: skip
         return (OK if code != 2 else FALLBACK), sweeps, residual, SOLVER_HYBRID
     sweeps, residual = pgs_into(
-        n, rw[0], rw[1], rw[2], rw[3], bw[3], bw[4], rw[4], rw[5], rw[6], rw[7], rw[8], rw[9],
-        vel_free, lam0, iopt[1], 1e-12, lam, vel, sv[2][0],
+        n, rw.body_a, rw.body_b, rw.jac_a, rw.jac_b, bw.resp_a, bw.resp_b, rw.lo, rw.hi, rw.comp,
+        rw.bias, rw.fric_of, rw.mu, vel_free, lam0, iopt[IOpt.iterations], 1e-12, lam, vel,
+        sv.values.s_vec,
     )  # fmt: skip
     return OK, sweeps, residual, SOLVER_PGS
 
@@ -158,7 +167,7 @@ def warm_table(rw, n, lam, keys, values):
     count = 0
     for i in range(n):
         if not is_null(rw, i):
-            keys[count], values[count] = rw[10][i], lam[i]
+            keys[count], values[count] = rw.key[i], lam[i]
             count += 1
     for i in range(1, count):
         key, value, k = keys[i], values[i], i - 1

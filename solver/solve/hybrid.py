@@ -33,9 +33,9 @@ linear-time elimination in place of the dense Q_XX factorisation.
 from __future__ import annotations
 
 import numpy as np
-import scipy.linalg
 
 from solver.rows.table import KIND_GRIP, KIND_JOINT, KIND_RHEOLOGY, Rows
+from solver.solve.direct import solve_spd
 from solver.solve.pgs import dense_pgs
 from solver.solve.response import dense_system
 
@@ -52,20 +52,13 @@ def dormant_rows(rows: Rows, lam0: np.ndarray) -> np.ndarray:
     return normal | ((rows.fric_of >= 0) & normal[np.maximum(rows.fric_of, 0)])
 
 
-def _solve_spd(q: np.ndarray, rhs: np.ndarray) -> np.ndarray:
-    try:
-        return scipy.linalg.cho_solve(scipy.linalg.cho_factor(q), rhs)
-    except np.linalg.LinAlgError:
-        return np.linalg.lstsq(q, rhs, rcond=None)[0]
-
-
 def schur_system(q: np.ndarray, c: np.ndarray, exact: np.ndarray, it: np.ndarray) -> tuple:
     """(S, s, X, x0) over the rows ``it`` with the rows ``exact`` eliminated:
     X = Q_XX⁻¹ Q_XU, x0 = Q_XX⁻¹ c_X, so λ_X = −(x0 + X λ_U)."""
     e, u = np.flatnonzero(exact), np.flatnonzero(it)
     if len(e) == 0:
         return q[np.ix_(u, u)], c[u], np.zeros((0, len(u))), np.zeros(0)
-    x = _solve_spd(q[np.ix_(e, e)], np.column_stack((c[e], q[np.ix_(e, u)])))
+    x = solve_spd(q[np.ix_(e, e)], np.column_stack((c[e], q[np.ix_(e, u)])))
     x0, xu = x[:, 0], x[:, 1:]
     s_mat = q[np.ix_(u, u)] - q[np.ix_(u, e)] @ xu
     return 0.5 * (s_mat + s_mat.T), c[u] - q[np.ix_(u, e)] @ x0, xu, x0

@@ -45,14 +45,14 @@ NU_CAP = 64  # iterated rows whose Schur complement fits the step's scratch (ker
 @kernel(error_model="numpy")
 def _body_dot(rw, r, x, movable):
     """J_r · x over the movable sides of row r (x (nodes, 6), body nodes first)."""
-    a, b = rw[0][r], rw[1][r]
+    a, b = rw.body_a[r], rw.body_b[r]
     s = 0.0
     if a >= 0 and movable[a] > 0.0:
         for k in range(6):
-            s += rw[2][r, k] * x[a, k]
+            s += rw.jac_a[r, k] * x[a, k]
     if b >= 0 and movable[b] > 0.0:
         for k in range(6):
-            s += rw[3][r, k] * x[b, k]
+            s += rw.jac_b[r, k] * x[b, k]
     return s
 
 
@@ -74,28 +74,28 @@ def _schur(rw, its, nu, seq, nseq, parent, nb, size, tw, movable, x, path, neede
     path[:] = 0
     needed[:] = 0
     for i in range(nu):
-        _mark_path(rw[0][its[i]], parent, movable, needed, 1)
-        _mark_path(rw[1][its[i]], parent, movable, needed, 1)
+        _mark_path(rw.body_a[its[i]], parent, movable, needed, 1)
+        _mark_path(rw.body_b[its[i]], parent, movable, needed, 1)
     for k in range(nu):
         r = its[k]
-        _mark_path(rw[0][r], parent, movable, path, k + 1)
-        _mark_path(rw[1][r], parent, movable, path, k + 1)
+        _mark_path(rw.body_a[r], parent, movable, path, k + 1)
+        _mark_path(rw.body_b[r], parent, movable, path, k + 1)
         for q in range(nseq):
             i = seq[q]
             if path[i] == k + 1 or needed[i] == 1:
                 for c in range(6):
                     x[i, c] = 0.0
-        a, b = rw[0][r], rw[1][r]
+        a, b = rw.body_a[r], rw.body_b[r]
         if a >= 0 and movable[a] > 0.0:
             for c in range(6):
-                x[a, c] += rw[2][r, c]
+                x[a, c] += rw.jac_a[r, c]
         if b >= 0 and movable[b] > 0.0:
             for c in range(6):
-                x[b, c] += rw[3][r, c]
+                x[b, c] += rw.jac_b[r, c]
         tree_substitute(seq, nseq, parent, nb, size, tw, x, path, k + 1, needed, 1)
         for i in range(nu):
             s_mat[i, k] = _body_dot(rw, its[i], x, movable)
-        s_mat[k, k] += rw[6][r]
+        s_mat[k, k] += rw.comp[r]
     for i in range(nu):
         for k in range(i):
             s_mat[i, k] = s_mat[k, i] = 0.5 * (s_mat[i, k] + s_mat[k, i])
@@ -104,9 +104,9 @@ def _schur(rw, its, nu, seq, nseq, parent, nb, size, tw, movable, x, path, neede
 @kernel(error_model="numpy", _nrt=False)
 def _solve_exact(seq, nseq, parent, nb, movable, rows, size, tw, vel, lam, out, forward):
     """λ of the forest's rows and out = vel + y, with v_free replaced by ``vel``, from
-    the right-hand sides of ``vel`` in tw[2] (init_rhs made them; forward False: init_nodes
+    the right-hand sides of ``vel`` in tw.rhs (init_rhs made them; forward False: init_nodes
     made them and tree_factor has run the forward pass)."""
-    x = tw[2]
+    x = tw.rhs
     if forward:
         forward_pass(seq, nseq, parent, nb, size, tw, x, parent, ALL)
     backward_pass(seq, nseq, parent, nb, size, tw, x, parent, ALL)
@@ -125,7 +125,7 @@ def _solve_exact(seq, nseq, parent, nb, movable, rows, size, tw, vel, lam, out, 
 @kernel(error_model="numpy", _nrt=False)
 def dormant_rows(rw, n, lam0, out):
     """out[:n] ← solver.solve.hybrid.dormant_rows on the table's first n rows."""
-    lo, hi, bias, fric = rw[4], rw[5], rw[7], rw[8]  # (not rw[k] inside and/or: see _update_sets)
+    lo, hi, bias, fric = rw.lo, rw.hi, rw.bias, rw.fric_of  # (not rw.x in and/or: _update_sets)
     for i in range(n):
         out[i] = False
         if lo[i] == 0.0 and hi[i] == np.inf and fric[i] < 0:
@@ -143,8 +143,8 @@ def _iterate(rw, its, nu, lam0, local, lo, hi, fric, mu, start):
         local[its[i]] = i
     for i in range(nu):
         r = its[i]
-        lo[i], hi[i], mu[i], start[i], fric[i] = rw[4][r], rw[5][r], rw[9][r], lam0[r], -1
-        normal = rw[8][r]
+        lo[i], hi[i], mu[i], start[i], fric[i] = rw.lo[r], rw.hi[r], rw.mu[r], lam0[r], -1
+        normal = rw.fric_of[r]
         if normal >= 0 and 0 <= local[normal] < nu and its[local[normal]] == normal:
             fric[i] = local[normal]
 
@@ -153,10 +153,12 @@ def _iterate(rw, its, nu, lam0, local, lo, hi, fric, mu, start):
 def _iterated(rw, its, nu, seq, nseq, parent, nb, size, tw, movable, lam0, iters, sv, s_mat):
     """λ_U of the rows its[:nu] into sv's lam_u by PGS on their Schur complement (built in
     s_mat (nu, nu)), the base velocities' s_U in sv's s_vec; (sweeps, residual)."""
-    ints, (s_vec, lo, hi, mu, start, lam_u, r_u) = sv[1], sv[2]
-    _schur(rw, its, nu, seq, nseq, parent, nb, size, tw, movable, tw[2], ints[4], ints[5], s_mat)
-    _iterate(rw, its, nu, lam0, ints[2], lo, hi, ints[3], mu, start)
-    return dense_pgs_into(nu, s_mat, s_vec, lo, hi, ints[3], mu, start, iters, 1e-12, lam_u, r_u)
+    ints, (s_vec, lo, hi, mu, start, lam_u, r_u) = sv.ints, sv.values
+    _schur(
+        rw, its, nu, seq, nseq, parent, nb, size, tw, movable, tw.rhs, ints.path, ints.needed, s_mat
+    )
+    _iterate(rw, its, nu, lam0, ints.local, lo, hi, ints.fric, mu, start)
+    return dense_pgs_into(nu, s_mat, s_vec, lo, hi, ints.fric, mu, start, iters, 1e-12, lam_u, r_u)
 
 
 @kernel(error_model="numpy", _nrt=True)
@@ -176,18 +178,18 @@ def _round(bw, tree, h, rw, lam, vel_p, its, nu, grips, lam0, iters, asleep, sv,
     nb = len(vel_p)
     free_grip, ngrip, body = grips
     nseq = forest_sequence(tree, nb, movable, free_grip, ngrip, body, asleep, joint_bone)
-    init_nodes(seq, nseq, nb, rw, vel_p, h, mass, inertia_w, rows, size, tw[0], tw[2])
+    init_nodes(seq, nseq, nb, rw, vel_p, h, mass, inertia_w, rows, size, tw.block, tw.rhs)
     if not tree_factor(seq, nseq, parent, nb, rw, rows, size, tw):
         return False, 0, 0.0
     _solve_exact(seq, nseq, parent, nb, movable, rows, size, tw, vel_p, lam, vel, False)
     if nu == 0:
         return True, 0, 0.0
-    s_vec, lam_u, pushed = sv[2][0], sv[2][5], sv[3][1]
+    s_vec, lam_u, pushed = sv.values.s_vec, sv.values.lam_u, sv.pushed
     for i in range(nu):
-        s_vec[i] = row_velocity(rw, its[i], vel) + rw[7][its[i]]
+        s_vec[i] = row_velocity(rw, its[i], vel) + rw.bias[its[i]]
     if nu <= NU_CAP:
         sweeps, residual = _iterated(rw, its, nu, seq, nseq, parent, nb, size, tw, movable,
-                                     lam0, iters, sv, square(sv[4], nu))  # fmt: skip
+                                     lam0, iters, sv, square(sv.s_mat, nu))  # fmt: skip
     else:
         sweeps, residual = _iterated_large(
             rw, its, nu, seq, nseq, parent, nb, size, tw, movable, lam0, iters, sv
@@ -196,7 +198,7 @@ def _round(bw, tree, h, rw, lam, vel_p, its, nu, grips, lam0, iters, asleep, sv,
         lam[its[i]] = lam_u[i]
     copy6(vel_p, pushed)
     apply_listed(rw, its, nu, resp_a, resp_b, lam, pushed)
-    init_rhs(seq, nseq, nb, rw, pushed, rows, size, tw[2])
+    init_rhs(seq, nseq, nb, rw, pushed, rows, size, tw.rhs)
     _solve_exact(seq, nseq, parent, nb, movable, rows, size, tw, pushed, lam, vel, True)
     return True, sweeps, residual
 
@@ -213,16 +215,16 @@ def hybrid_solve(bw, tree, h, rw, n, ne, vel_free, lam0, iterations, grip, skip,
     NU_CAP rows are iterated).  Without iterated rows (a table of joint and grip rows
     only) this is the direct solve's active set on the grip (kernel.direct)."""
     grip0, ngrip, body = grip
-    resp_a, resp_b = bw[3], bw[4]
-    (at_lo, at_hi, dormant), (its, pinned, _, _, _, _, free_grip) = sv[0], sv[1]
-    vel_p = sv[3][0]
+    resp_a, resp_b = bw.resp_a, bw.resp_b
+    (at_lo, at_hi, dormant), (its, pinned, _, _, _, _, free_grip) = sv.flags, sv.ints
+    vel_p = sv.vel_p
     if skip:
         dormant_rows(rw, n, lam0, dormant)
     for i in range(n):
         at_lo[i], at_hi[i], lam[i] = False, False, 0.0
         if not skip:
             dormant[i] = False
-    lo, hi, kind = rw[4], rw[5], rw[11]
+    lo, hi, kind = rw.lo, rw.hi, rw.kind
     sweeps, residual = 0, 0.0
     for _ in range(rounds):
         nu, nfree, npin = 0, 0, 0
@@ -257,7 +259,7 @@ def _update_sets(rw, ne, n, lam, vel, grip0, ngrip, dormant, at_lo, at_hi):
 
     The row arrays are taken out of the table once: an array read from a tuple inside an
     and/or costs two uncancelled reference counts each time (~300 ns, numba 0.68)."""
-    lo, hi, comp, bias, fric = rw[4], rw[5], rw[6], rw[7], rw[8]
+    lo, hi, comp, bias, fric = rw.lo, rw.hi, rw.comp, rw.bias, rw.fric_of
     changed = False
     for i in range(ne, n):
         r = row_velocity(rw, i, vel) + comp[i] * lam[i] + bias[i]

@@ -13,12 +13,13 @@ This shares no code with the PGS solver.
 from __future__ import annotations
 
 import numpy as np
-import scipy.linalg
-import scipy.optimize
 
 
 def _box_qp(q: np.ndarray, c: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     """Exact minimiser of ½λᵀQλ + cᵀλ over lo ≤ λ ≤ hi (variables with lo == hi fixed)."""
+    import scipy.linalg  # on use: importing scipy's costs ~0.3 s a run that does not need it
+    import scipy.optimize
+
     lam = np.where(np.isfinite(lo), lo, 0.0)
     free = hi - lo > 0.0
     lam[~free] = lo[~free]

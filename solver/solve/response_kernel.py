@@ -11,8 +11,8 @@ from solver.jit import kernel
 def response(rw, start, n, inv_mass, inv_i, h, resp_a, resp_b):
     """Velocity change per unit row force: h M⁻¹ jac, per side (0 for the world), of
     rows start … n − 1."""
-    _response_side(rw[0], rw[2], start, n, inv_mass, inv_i, h, resp_a)
-    _response_side(rw[1], rw[3], start, n, inv_mass, inv_i, h, resp_b)
+    _response_side(rw.body_a, rw.jac_a, start, n, inv_mass, inv_i, h, resp_a)
+    _response_side(rw.body_b, rw.jac_b, start, n, inv_mass, inv_i, h, resp_b)
 
 
 @kernel(error_model="numpy")
@@ -42,8 +42,8 @@ def row_response(body, jac, i, inv_mass, inv_i, h):
 @kernel(error_model="numpy")
 def apply(rw, n, resp_a, resp_b, lam, vel):
     """vel += response to λ: every row's a side, then every row's b side (np.add.at order)."""
-    _apply_side(rw[0], n, resp_a, lam, vel)
-    _apply_side(rw[1], n, resp_b, lam, vel)
+    _apply_side(rw.body_a, n, resp_a, lam, vel)
+    _apply_side(rw.body_b, n, resp_b, lam, vel)
 
 
 @kernel(error_model="numpy", inline="always")
@@ -59,7 +59,7 @@ def apply_listed(rw, rows, count, resp_a, resp_b, lam, vel):
     """vel += response to λ of the rows rows[:count] only (ascending: the order of
     ``apply``)."""
     for side in range(2):
-        body, resp = (rw[0], resp_a) if side == 0 else (rw[1], resp_b)
+        body, resp = (rw.body_a, resp_a) if side == 0 else (rw.body_b, resp_b)
         for q in range(count):
             i = rows[q]
             if body[i] >= 0:

@@ -9,6 +9,7 @@ import numpy as np
 
 import solver.compiled.fast as fast
 from solver.compiled.fast import FIELDS, SOLVER_NAMES, _successor, kernel_report
+from solver.compiled.layout import ReportFloat, StateSet
 from solver.state import State, StepReport
 
 
@@ -35,12 +36,14 @@ def test_kernel_fields_are_state_fields():
 
 def test_states_and_reports_are_the_constructors():
     arrays = tuple(np.full(k + 1, float(k)) for k in range(len(FIELDS)))
-    got = _successor(State(0.0, 0, *arrays), 0.5, 3, arrays[:9] + arrays[11:], *arrays[9:11])
+    out = StateSet(*arrays[:9], *arrays[11:])  # State's order: x … τ, warm keys and λ, sleep
+    got = _successor(State(0.0, 0, *arrays), 0.5, 3, out, *arrays[9:11])
     assert same(got, State(0.5, 3, *arrays))
     assert dataclasses.replace(got, step=4).step == 4
-    rep_f = np.arange(10.0)
+    rep_f, at = np.arange(10.0), ReportFloat
     got = kernel_report(np.array([108, 2, 15, 1]), rep_f)
-    want = StepReport(108, 2, 15, 0.0, SOLVER_NAMES[1], rep_f[1:4], rep_f[4:7], rep_f[7:10])
+    force, torque = rep_f[at.grip_force : at.grip_torque], rep_f[at.grip_torque : at.touch_force]
+    want = StepReport(108, 2, 15, 0.0, SOLVER_NAMES[1], force, torque, rep_f[at.touch_force :])
     assert same(got, want)
 
 
@@ -50,7 +53,6 @@ def test_a_state_subclass_keeps_its_fields():
         tag: str = ""
 
     arrays = tuple(np.full(2, float(k)) for k in range(len(FIELDS)))
-    got = _successor(
-        Tagged(0.0, 0, *arrays, tag="a"), 0.5, 1, arrays[:9] + arrays[11:], *arrays[9:11]
-    )
+    out = StateSet(*arrays[:9], *arrays[11:])
+    got = _successor(Tagged(0.0, 0, *arrays, tag="a"), 0.5, 1, out, *arrays[9:11])
     assert type(got) is Tagged and got.tag == "a" and got.time == 0.5

@@ -20,8 +20,9 @@ from solver.collide.pointer import pointer_contacts
 from solver.collide.pointer_kernel import collide_pointer
 from solver.collide.scene_kernel import collide_scene, world_shapes
 from solver.collide.segment_kernel import segment_segment
-from solver.compiled.flat import unflatten
+from solver.compiled.layout import Contacts, Opt
 from solver.compiled.pack import pack
+from solver.compiled.views import packed_view
 from solver.model import build_model
 from solver.rows.build import build_rows
 from solver.rows.joints import joint_frames
@@ -68,11 +69,15 @@ def mixed_scene() -> RigSpec:
 
 def assert_same_contacts(expected: collide.Contacts, cb: tuple, n: int, offset: int = 0):
     assert n == len(expected.key)
-    assert np.array_equal(cb[6][:n], expected.key + offset)
-    assert np.array_equal(cb[0][:n], expected.body_a)
-    assert np.array_equal(cb[1][:n], expected.body_b)
-    assert np.array_equal(cb[5][:n], expected.friction)
-    for got, want in ((cb[2], expected.point), (cb[3], expected.normal), (cb[4], expected.depth)):
+    assert np.array_equal(cb.key[:n], expected.key + offset)
+    assert np.array_equal(cb.body_a[:n], expected.body_a)
+    assert np.array_equal(cb.body_b[:n], expected.body_b)
+    assert np.array_equal(cb.friction[:n], expected.friction)
+    for got, want in (
+        (cb.point, expected.point),
+        (cb.normal, expected.normal),
+        (cb.depth, expected.depth),
+    ):
         assert np.abs(got[:n] - want).max(initial=0.0) < 1e-12
 
 
@@ -81,7 +86,7 @@ def test_narrow_phase_equals_numpy_collide(seed):
     rng = np.random.default_rng(seed)
     model = build_model(mixed_scene())
     fm = pack(model)
-    g, cb, centre, rot = fm.g, fm.ws[4], fm.ws[8], fm.ws[9]
+    g, cb, centre, rot = fm.g, fm.ws.contacts, fm.ws.shape_centre, fm.ws.shape_rot
     nb = model.nbody
     pos = rng.uniform([-0.2, -0.02, -0.2], [0.2, 0.25, 0.2], size=(nb, 3))
     q = quat.normalize(rng.normal(size=(nb, 4)))
@@ -101,10 +106,12 @@ def test_narrow_phase_equals_numpy_collide(seed):
         assert_same_contacts(expected, cb, n)
 
 
-def _buffers(k: int = 8) -> tuple:
-    """Contact buffers (body_a, body_b, point, normal, depth, friction, key) for k contacts."""
+def _buffers(k: int = 8) -> Contacts:
+    """Contact buffers for k contacts."""
     z = np.zeros
-    return (z(k, np.int64), z(k, np.int64), z((k, 3)), z((k, 3)), z(k), z(k), z(k, np.int64))
+    return Contacts(
+        z(k, np.int64), z(k, np.int64), z((k, 3)), z((k, 3)), z(k), z(k), z(k, np.int64)
+    )
 
 
 CTX = (0, 1, 0.5, 1.0, 0)  # a narrow kernel's pair: bodies 0, 1, friction, sign, key base
@@ -124,8 +131,8 @@ def _assert_features(found: tuple, cb: tuple, n: int) -> None:
     """The compiled kernel's contacts (features in order, key = feature) are numpy's kept ones."""
     point, normal, depth, keep = (x[0] for x in found)
     kept = np.flatnonzero(keep)
-    assert np.array_equal(cb[6][:n], kept)
-    for got, want in ((cb[2], point), (cb[3], normal), (cb[4], depth)):
+    assert np.array_equal(cb.key[:n], kept)
+    for got, want in ((cb.point, point), (cb.normal, normal), (cb.depth, depth)):
         assert np.abs(got[:n] - want[kept]).max(initial=0.0) < 1e-12
 
 
@@ -196,7 +203,7 @@ def test_box_box_within_reach_is_declined():
     fm = pack(model)
     pos = np.zeros((model.nbody, 3))
     q = np.tile(quat.IDENTITY, (model.nbody, 1))
-    g, cb, centre, rot = fm.g, fm.ws[4], fm.ws[8], fm.ws[9]
+    g, cb, centre, rot = fm.g, fm.ws.contacts, fm.ws.shape_centre, fm.ws.shape_rot
     world_shapes(g, pos, q, centre, rot)
     awake = np.ones(model.nbody, np.bool_)
     assert (
@@ -215,10 +222,16 @@ def test_box_box_within_reach_is_declined():
     assert fm2.reason is not None
     pos2, q2 = np.zeros((len(pos) + 1, 3)), np.tile(quat.IDENTITY, (len(pos) + 1, 1))
     pos2[-2:] = [[0.0, 1.0, 0.0], [0.1, 1.0, 0.0]]  # the two boxes overlap
-    world_shapes(fm2.g, pos2, q2, fm2.ws[8], fm2.ws[9])
+    world_shapes(fm2.g, pos2, q2, fm2.ws.shape_centre, fm2.ws.shape_rot)
     assert (
         collide_scene(
-            fm2.g, fm2.ws[8], fm2.ws[9], 0.01, fm2.ws[4], True, np.ones(len(pos2), np.bool_)
+            fm2.g,
+            fm2.ws.shape_centre,
+            fm2.ws.shape_rot,
+            0.01,
+            fm2.ws.contacts,
+            True,
+            np.ones(len(pos2), np.bool_),
         )
         == -1
     )
@@ -299,14 +312,16 @@ def test_qlog_series_equals_the_exact_logarithm():
 
 @numba.njit
 def _fast_limit_rows(flat, body_quat, body_rot):
-    m, _, _, _, ws, _, opt, _ = unflatten(flat)
+    packed = packed_view(flat, 0)
+    opt = packed.opt
     asleep = np.zeros(len(body_quat), dtype=np.bool_)
-    limits = limit_arrays(m)
-    nj = len(limits[0])
+    limits = limit_arrays(packed.m)
+    nj = len(limits.parent)
     gaps, turned = np.empty((nj, 3)), np.empty((nj, 3))
     return limit_rows(
-        limits, body_quat, body_rot, opt[0], opt[1], opt[5], asleep, ws[0], 0, gaps, turned
-    )
+        limits, body_quat, body_rot, opt[Opt.h], opt[Opt.joint_erp], opt[Opt.limit_margin],
+        asleep, packed.ws.rows, 0, gaps, turned,
+    )  # fmt: skip
 
 
 def _near(rng, edge: float, far: tuple[float, float]) -> float:
@@ -348,10 +363,10 @@ def test_limit_rows_at_their_margins_equal_numpys(limits):
         frames = joint_frames(model, model.body_pos0, body_quat, body_rot)
         want = numpy_limit_rows(model, frames, 0.001)
         n = _fast_limit_rows(fm.flat, body_quat, body_rot)
-        rw = fm.ws[0]
-        assert np.array_equal(rw[10][:n], want.key)
-        assert np.array_equal(rw[1][:n], want.body_b)
-        assert np.abs(rw[3][:n] - want.jac_b).max(initial=0.0) < 1e-12
-        assert np.abs(rw[7][:n] - want.bias).max(initial=0.0) < 1e-9
+        rw = fm.ws.rows
+        assert np.array_equal(rw.key[:n], want.key)
+        assert np.array_equal(rw.body_b[:n], want.body_b)
+        assert np.abs(rw.jac_b[:n] - want.jac_b).max(initial=0.0) < 1e-12
+        assert np.abs(rw.bias[:n] - want.bias).max(initial=0.0) < 1e-9
         made, skipped = made + n, skipped + 3 * model.njoint - n
     assert made > 100 and skipped > 100

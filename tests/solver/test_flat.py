@@ -1,6 +1,7 @@
 """solver.compiled.flat: the packed model's arrays as views of a few buffers, rebuilt in
 compiled code.  What the step sees must be exactly the arrays Python reads and writes
-(fm.ws, fm.iopt …): same memory, same shapes, shared where pack shares them."""
+(fm.ws, fm.iopt …): same memory, same shapes, shared where pack shares them; the generated
+views are the layout's."""
 
 from __future__ import annotations
 
@@ -12,8 +13,11 @@ import pytest
 from rigbuild import chain
 
 from puppetcli.rigfile import load_rig
-from solver.compiled.flat import NLEAF, SCHEMA, flatten, unflatten
+from solver.compiled import layout
+from solver.compiled.flat import flatten
+from solver.compiled.layout import IOpt, Opt, Packed, leaf_count
 from solver.compiled.pack import pack
+from solver.compiled.views import packed_view
 from solver.model import build_model
 
 DOLL = Path(__file__).resolve().parents[2] / "rigs" / "doll.yaml"
@@ -30,20 +34,21 @@ def leaves(x) -> list:
 def test_compiled_views_are_the_python_views(model):
     fm = pack(model)  # kept alive: the compiled views returned here hold no reference
     python = leaves(tuple(getattr(fm, p) for p in PARTS))
-    compiled = leaves(unflatten(fm.flat))
-    assert len(python) == len(compiled) == NLEAF == len(fm.flat[-1])
+    compiled = leaves(packed_view(fm.flat, 0))
+    assert len(python) == len(compiled) == leaf_count(Packed) == len(fm.flat[-1])
     for a, b in zip(python, compiled, strict=True):
         assert (a.dtype, a.shape) == (b.dtype, b.shape)
         assert a.size == 0 or a.ctypes.data == b.ctypes.data
-    fm.iopt[7] = 5
-    assert unflatten(fm.flat)[7][7] == 5  # a write through the Python view reaches the step
-    assert fm.ptree[5][0] is fm.tree[7][0]  # pack's sharing is kept
+    fm.iopt[IOpt.profiling] = 5
+    assert packed_view(fm.flat, 0).iopt[IOpt.profiling] == 5  # a Python write reaches the step
+    assert fm.ptree.work.block is fm.tree.work.block  # pack's sharing is kept
 
 
 def test_views_hold_the_packed_values_and_do_not_overlap():
     model = build_model(load_rig(DOLL))
     fm = pack(model)
-    assert np.array_equal(fm.m[17], model.body_inertia) and fm.opt[0] == model.options.h
+    assert np.array_equal(fm.m.body_inertia, model.body_inertia)
+    assert fm.opt[Opt.h] == model.options.h and fm.opt[Opt.sleep_time] == model.options.sleep_time
     spans = {}
     for a in {id(a): a for a in leaves(tuple(getattr(fm, p) for p in PARTS))}.values():
         if a.size:
@@ -57,8 +62,14 @@ def test_views_hold_the_packed_values_and_do_not_overlap():
 
 def test_an_array_of_another_kind_is_refused():
     fm = pack(build_model(chain(2, 0.01)))
-    parts = [getattr(fm, p) for p in PARTS]
-    parts[0] = (*fm.m[:4], fm.m[4].astype(np.float32), *fm.m[5:])
-    with pytest.raises(TypeError, match=r"\[0\]\[4\]: expected f3"):
-        flatten(tuple(parts))
-    assert len(SCHEMA) == len(PARTS)
+    parts = fm.packed._replace(m=fm.m._replace(joint_kf=fm.m.joint_kf.astype(np.float32)))
+    with pytest.raises(TypeError, match=r"\.m\.joint_kf: expected f3"):
+        flatten(parts)
+    with pytest.raises(TypeError, match=r"\.m: expected ModelArrays, got tuple"):
+        flatten(fm.packed._replace(m=tuple(fm.m)))
+    assert Packed._fields == PARTS
+
+
+def test_the_views_are_generated_from_the_layout():
+    """solver/compiled/views.py is what ``python -m solver.compiled.layout`` writes."""
+    assert layout.VIEWS.read_text() == layout.views_source()
