@@ -6,7 +6,7 @@ file format and our choices are in ``docs/bvh.md``.
 Rotation channels.  Degrees.  The rotation channels of a joint, in the order
 listed, are *intrinsic* elemental rotations: ``CHANNELS 3 Zrotation Xrotation
 Yrotation`` means R = Rz(z)·Rx(x)·Ry(y) for column vectors, i.e. the quaternion
-q = q_z ⊗ q_x ⊗ q_y (scipy ``from_euler("ZXY", [z, x, y])``, upper case =
+q = q_z ⊗ q_x ⊗ q_y (scipy's ``from_euler("ZXY", [z, x, y])``, upper case =
 intrinsic).
 
 Forward kinematics (4×4 transforms, column vectors)::
@@ -26,11 +26,9 @@ rotation q_parent⁻¹ ⊗ q_child (the root's: its world rotation).
 
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial.transform import Rotation
 
 from puppetcli.errors import PuppetError
 from solver import quat
@@ -164,24 +162,42 @@ def forward_kinematics(
 
 
 def quat_from_euler(angles: np.ndarray, order: str) -> np.ndarray:
-    """Unit quaternions (n,4) of intrinsic rotations ``angles`` (n, len(order)) in degrees."""
-    rotation = Rotation.from_euler(order.upper(), np.asarray(angles, dtype=float), degrees=True)
-    return rotation.as_quat(scalar_first=True).reshape(-1, 4)
+    """Unit quaternions (n,4) of intrinsic rotations ``angles`` (n, len(order)) in degrees:
+    q = q_first ⊗ q_second ⊗ q_third, each about its axis."""
+    half = np.radians(np.asarray(angles, dtype=float).reshape(-1, len(order))) / 2.0
+    q = np.tile(quat.IDENTITY, (len(half), 1))
+    for k, axis in enumerate(order.upper()):
+        elemental = np.zeros((len(half), 4))
+        elemental[:, 0] = np.cos(half[:, k])
+        elemental[:, 1 + "XYZ".index(axis)] = np.sin(half[:, k])
+        q = quat.mul(q, elemental)
+    return q
 
 
 def euler_from_quat(q: np.ndarray, order: str) -> np.ndarray:
     """Intrinsic Tait–Bryan angles (n,3) in degrees of unit quaternions (n,4), in ``order``.
 
-    scipy's quaternion algorithm (double precision): the first and third angles
-    in (−180°, 180°], the middle one in [−90°, 90°].  At exact gimbal lock
-    (middle angle ±90°) only the sum or difference of the other two is defined
-    and the third is set to 0; scipy's warning about it is silenced because the
-    triple still reproduces the rotation.
+    For R = R_i(a)·R_j(b)·R_k(c) (axes i, j, k of ``order``, s = +1 for a cyclic order,
+    −1 otherwise): sin b = s·R_ik, tan a = −s·R_jk / R_kk, tan c = −s·R_ij / R_ii, b from
+    atan2 so it stays accurate near ±90°.  The first and third angles are in
+    (−180°, 180°], the middle one in [−90°, 90°] (scipy's ``as_euler`` convention, which
+    tests/puppetcli/test_bvh_read.py checks this against).  At gimbal lock (|cos b| below
+    1e-12) only a ± c is defined: c is set to 0.  Written out rather than scipy's because
+    importing scipy.spatial costs a third of a second of every pose.
     """
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message=".*[Gg]imbal lock.*")
-        rotation = Rotation.from_quat(np.asarray(q, dtype=float).reshape(-1, 4), scalar_first=True)
-        return rotation.as_euler(order.upper(), degrees=True)
+    i, j, k = ("XYZ".index(axis) for axis in order.upper())
+    s = 1.0 if (i, j, k) in ((0, 1, 2), (1, 2, 0), (2, 0, 1)) else -1.0
+    r = quat.matrix(quat.normalize(np.asarray(q, dtype=float).reshape(-1, 4)))
+    cos_b = np.hypot(r[:, i, i], r[:, i, j])
+    b = np.arctan2(s * r[:, i, k], cos_b)
+    locked = cos_b < 1e-12
+    a = np.where(
+        locked,
+        np.arctan2(s * r[:, k, j], r[:, j, j]),
+        np.arctan2(-s * r[:, j, k], r[:, k, k]),
+    )
+    c = np.where(locked, 0.0, np.arctan2(-s * r[:, i, j], r[:, i, i]))
+    return np.degrees(np.stack((a, b, c), axis=1))
 
 
 def unwrap_euler(angles: np.ndarray) -> np.ndarray:

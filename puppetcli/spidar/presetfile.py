@@ -20,7 +20,6 @@ import json
 from pathlib import Path
 
 import numpy as np
-from scipy.spatial import QhullError
 
 from puppetcli.spidar.errors import DeviceError
 from puppetcli.spidar.presets import DevicePreset, preset
@@ -106,6 +105,8 @@ def _read_string(node: Node) -> tuple[np.ndarray, np.ndarray, float, float | Non
 
 def _check_layout(preset: DevicePreset, strings: Node, items: list[Node]) -> None:
     """The grip must sit inside the frame at home and the strings must control 6 DOF."""
+    from scipy.spatial import QhullError  # on use: importing scipy's costs a run ~0.3 s
+
     try:
         planes = preset.frame_planes
     except QhullError:

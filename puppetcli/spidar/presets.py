@@ -27,7 +27,6 @@ from dataclasses import dataclass
 from functools import cached_property
 
 import numpy as np
-from scipy.spatial import ConvexHull
 
 from puppetcli.spidar.errors import DeviceError
 from solver import quat
@@ -98,6 +97,8 @@ class DevicePreset:
     @cached_property
     def frame_planes(self) -> np.ndarray:
         """Half-spaces (k,4) of the convex hull of the string exits: n·x + d ≤ 0 inside."""
+        from scipy.spatial import ConvexHull  # on use: importing scipy's costs a run ~0.3 s
+
         return ConvexHull(self.motor_pos).equations
 
 

@@ -24,7 +24,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import linprog
 
 from puppetcli.spidar.boxqp import solve_box_qp
 from puppetcli.spidar.errors import DeviceError
@@ -153,6 +152,8 @@ def motor_volts(preset: DevicePreset, tensions: np.ndarray) -> np.ndarray:
 
 def _max_along(a: np.ndarray, direction: np.ndarray, t_min: float, t_max: float) -> float:
     """max α s.t. Aᵀt = α·direction, t ∈ [t_min, t_max]ⁿ (0 when not even α = 0 is feasible)."""
+    from scipy.optimize import linprog  # on use: importing scipy's costs a run ~0.3 s
+
     n = len(a)
     cost = np.zeros(n + 1)
     cost[-1] = -1.0
