@@ -10,21 +10,18 @@ only overwritten when the user passes ``--force``.
 from __future__ import annotations
 
 import itertools
-import json
 import os
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from puppetcli.errors import PuppetError
+from puppetcli.jsontext import json_text
 
 __all__ = [
     "OutputError",
     "atomic_path",
-    "json_text",
     "prepare_outdir",
     "write_json_atomic",
     "write_text_atomic",
@@ -77,53 +74,26 @@ def write_text_atomic(path: Path, text: str) -> None:
         os.fsync(f.fileno())
 
 
-def _plain(obj: Any) -> Any:
-    """Turn numpy arrays and scalars into the Python lists/numbers json understands."""
-    if isinstance(obj, np.ndarray | np.generic):
-        return obj.tolist()
-    return obj
-
-
-def _is_container(obj: Any) -> bool:
-    return isinstance(obj, dict | list | tuple | np.ndarray)
-
-
-def _encode(obj: Any, level: int) -> str:
-    """Recursive pretty encoder: 2-space indent, lists of scalars kept on one line."""
-    obj = _plain(obj)
-    pad, inner = "  " * level, "  " * (level + 1)
-    if isinstance(obj, dict):
-        if not obj:
-            return "{}"
-        for key in obj:
-            if not isinstance(key, str):
-                raise TypeError(f"JSON object keys must be strings, got {key!r}")
-        items = [f"{inner}{json.dumps(k)}: {_encode(v, level + 1)}" for k, v in obj.items()]
-        return "{\n" + ",\n".join(items) + "\n" + pad + "}"
-    if isinstance(obj, list | tuple):
-        if not any(_is_container(v) for v in obj):
-            return "[" + ", ".join(_encode(v, level + 1) for v in obj) + "]"
-        items = [inner + _encode(v, level + 1) for v in obj]
-        return "[\n" + ",\n".join(items) + "\n" + pad + "]"
-    # Scalars: json.dumps gives repr-exact floats and rejects NaN/Infinity.
-    return json.dumps(obj, allow_nan=False)
-
-
-def json_text(obj: Any) -> str:
-    """Deterministic, human-readable JSON for ``obj`` (key order as given), newline-terminated.
-
-    Floats are written with ``repr`` precision (exact round trip); NaN and
-    infinities raise ``ValueError`` because strict JSON parsers reject them.
-    """
-    return _encode(obj, 0) + "\n"
-
-
 def write_json_atomic(path: Path, obj: Any) -> None:
     """Write ``obj`` as JSON (see :func:`json_text`) to ``path`` atomically.
 
     The text is built before any file is touched, so a NaN leaves no trace on disk.
     """
     write_text_atomic(path, json_text(obj))
+
+
+def refuse_overwrite(path: Path, force: bool) -> None:
+    """Stop with a clear line unless ``path`` is free to write: absent, or ``force``."""
+    if not force and (path.exists() or path.is_symlink()):
+        raise OutputError(f"{path} exists: pass --force to overwrite")
+
+
+def make_parent(path: Path) -> None:
+    """Create the folder ``path`` goes in (and its parents)."""
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise OutputError(f"{path.parent}: cannot create directory: {exc.strerror}") from exc
 
 
 def prepare_outdir(outdir: Path, names: Sequence[str], force: bool) -> None:
@@ -135,9 +105,5 @@ def prepare_outdir(outdir: Path, names: Sequence[str], force: bool) -> None:
         outdir.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise OutputError(f"{outdir}: cannot create directory: {exc.strerror}") from exc
-    if force:
-        return
     for name in names:
-        target = outdir / name
-        if target.exists() or target.is_symlink():
-            raise OutputError(f"{target} exists: pass --force to overwrite")
+        refuse_overwrite(outdir / name, force)

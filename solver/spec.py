@@ -1,6 +1,6 @@
 """Plain-data description of a rig, as the rig file states it.
 
-A ``RigSpec`` is what ``puppetcli.rigfile`` produces after validation and what
+A ``RigSpec`` is what ``puppetcli.rig.load`` produces after validation and what
 ``solver.model.build_model`` consumes.  Everything here is in SI units (metres,
 kilograms, seconds, radians) in the world frame of the rest pose: right-handed,
 Y up.  Nothing here is derived; derived quantities (inertia tensors, row counts)

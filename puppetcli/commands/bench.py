@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from puppetcli.bench import (
+from puppetcli.bench.solvers import (
     INSTALL_HINT,
     SOLVERS,
     csv_text,
@@ -81,7 +81,7 @@ SOLVER_CHOICES = [*SOLVERS, "reference"]
 @click.option(
     "--skips",
     is_flag=True,
-    help="Measure each skip of unneeded work on and off instead (puppetcli/bench_skips.py).",
+    help="Measure each skip of unneeded work on and off instead (puppetcli/bench/skips.py).",
 )
 @click.option(
     "--live",
@@ -135,28 +135,28 @@ def command(
     processor's cycle counter inside the compiled step).  With --skips: each skip of
     unneeded work (pair culling, dormant rows, the direct solve) on and off.
 
-    With --precision: the work-precision study (puppetcli/precision.py): creep against
+    With --precision: the work-precision study (puppetcli/bench/precision.py): creep against
     its exact solution, a 10-link chain after 1 s and 3 s and the gripped doll against
     converged references, for PGS (5/15/50 sweeps, warm start off/on/0.7), direct, auto
     and hybrid (15/50 sweeps) at h = 1, 5, 20 ms on the compiled step, with a verdict
     per scene against the paper's setting (PGS 15, warm start) at equal run time.
     """
     if live:
-        from puppetcli.bench_live import format_live, measure_live
+        from puppetcli.bench.live import format_live, measure_live
 
         source = click.get_current_context().get_parameter_source("steps_h")
         default = source == click.core.ParameterSource.DEFAULT
         click.echo(format_live(measure_live([0.001, 0.005] if default else list(steps_h))))
         return
     if pose:
-        from puppetcli.bench_pose import format_pose, measure_pose
+        from puppetcli.bench.pose import format_pose, measure_pose
 
         source = click.get_current_context().get_parameter_source("steps_h")
         default = source == click.core.ParameterSource.DEFAULT
         click.echo(format_pose(measure_pose([None, 0.001] if default else list(steps_h))))
         return
     if skips:
-        from puppetcli.bench_skips import format_skips, measure_skips
+        from puppetcli.bench.skips import format_skips, measure_skips
 
         click.echo(format_skips(measure_skips(steps_h[0], seconds), steps_h[0]))
         return
@@ -178,7 +178,7 @@ def command(
 
 def _peers_available() -> bool:
     """True when MuJoCo can be used; otherwise says how to get it (the run goes on)."""
-    from puppetcli import peers
+    from puppetcli.bench import peers
 
     version = peers.mujoco_version()
     click.echo(INSTALL_HINT if version is None else f"peers: MuJoCo {version}")
@@ -186,10 +186,10 @@ def _peers_available() -> bool:
 
 
 def _precision(quick: bool, out_dir: Path | None, peers: bool) -> None:
-    from puppetcli.precision import format_table as precision_table
-    from puppetcli.precision import study, write_outputs
-    from puppetcli.precision_peers import stability_lines
-    from puppetcli.precision_verdict import verdicts
+    from puppetcli.bench.precision import format_table as precision_table
+    from puppetcli.bench.precision import study, write_outputs
+    from puppetcli.bench.precision_peers import stability_lines
+    from puppetcli.bench.verdict import verdicts
 
     rows = study(quick=quick, peers=peers)
     click.echo(precision_table(rows))

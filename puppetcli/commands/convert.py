@@ -10,16 +10,16 @@ from pathlib import Path
 
 import click
 
-from puppetcli.bvh import ORDERS
-from puppetcli.bvh_write import FrameSampler, write_keys_bvh
+from puppetcli.bvh.write import FrameSampler, write_keys_bvh
+from puppetcli.commands.options import ENGINE_OPTION, force_option, order_option, scale_option
 from puppetcli.errors import ScriptError
-from puppetcli.outputs import OutputError
-from puppetcli.replay import load_replay
-from puppetcli.rigfile import load_rig
-from puppetcli.runner import Runner, script_model
-from puppetcli.script import load_script
-from puppetcli.skeleton import Skeleton
-from puppetcli.warmup import ENGINE_OPTION, prepare_engine
+from puppetcli.mcap.replay import load_replay
+from puppetcli.outputs import make_parent, refuse_overwrite
+from puppetcli.rig.load import load_rig
+from puppetcli.rig.skeleton import Skeleton
+from puppetcli.run.runner import Runner, script_model
+from puppetcli.run.warmup import prepare_engine
+from puppetcli.script.load import load_script
 from solver.model import Model, build_model
 
 MAX_STEPS = 10_000_000  # as `pose`: a run longer than this is a mistake in the script
@@ -40,15 +40,9 @@ KEYS_FPS = 30.0  # Frame Time of a BVH of keys when no --fps is given
     "--fps", type=click.FloatRange(min=0.0, min_open=True), default=None,
     help="Write the whole motion sampled at this rate [default: one frame per key, at 30 fps].",
 )  # fmt: skip
-@click.option(
-    "--order", type=click.Choice(ORDERS, case_sensitive=False), default="ZXY",
-    show_default=True, help="Rotation channel order of every joint.",
-)  # fmt: skip
-@click.option(
-    "--scale", type=click.FloatRange(min=0.0, min_open=True), default=1.0, show_default=True,
-    help="File units per metre (100 for centimetres).",
-)  # fmt: skip
-@click.option("--force", is_flag=True, help="Overwrite OUT.bvh if it exists.")
+@order_option("every joint")
+@scale_option("File units per metre (100 for centimetres).")
+@force_option("OUT.bvh if it exists")
 @ENGINE_OPTION
 def command(
     source: Path,
@@ -67,8 +61,7 @@ def command(
     run is sampled at that rate.  If the simulation fails, the frames before
     the failure are still written and the exit status is 1.
     """
-    if (out.exists() or out.is_symlink()) and not force:
-        raise OutputError(f"{out} exists: pass --force to overwrite")
+    refuse_overwrite(out, force)
     spec = load_rig(rig)
     replay = load_replay(source, spec) if source.suffix.lower() == ".mcap" else None
     if replay is not None and replay.warning:
@@ -90,10 +83,7 @@ def command(
     frames = sampler.frames if sampler is not None else list(result.keys)
     if not frames:
         raise ScriptError(f"{source}: expected at least one 'key' action (or --fps), got none")
-    try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise OutputError(f"{out.parent}: cannot create directory: {exc.strerror}") from exc
+    make_parent(out)
     write_keys_bvh(out, Skeleton.from_spec(spec), frames, order.upper(), scale, fps or KEYS_FPS)
     what = f"{len(frames)} frames at {fps:g} fps" if fps else f"{len(frames)} keys"
     click.echo(f"wrote {out}: {what}, {result.state.time:.3f} s simulated, order {order.upper()}")

@@ -16,19 +16,20 @@ from pathlib import Path
 import click
 import numpy as np
 
-from puppetcli.keyoutputs import KEY_OUTPUTS, write_key_outputs
+from puppetcli.commands.options import force_option, step_option, view_option
 from puppetcli.live.recording import POINTER_RADIUS, LiveRecording
 from puppetcli.live.scene import scene_bounds, scene_description
 from puppetcli.live.server import FRAME_HZ, LOOPBACK, LiveServer, Outcome
-from puppetcli.outputs import OutputError, prepare_outdir
-from puppetcli.record import FIT_FRACTION, device_reach, fit_workspace
-from puppetcli.render_camera import parse_view
-from puppetcli.rigfile import load_rig
-from puppetcli.script import DEFAULT_MAX_FORCE, DEFAULT_MAX_TORQUE
-from puppetcli.script_actions import GRIP_DEFAULTS
-from puppetcli.session import METADATA_NAME, Workspace
+from puppetcli.mcap.record import FIT_FRACTION, device_reach, fit_workspace
+from puppetcli.mcap.session import METADATA_NAME, Workspace
+from puppetcli.outputs import OutputError, prepare_outdir, refuse_overwrite
+from puppetcli.render.camera import parse_view
+from puppetcli.rig.load import load_rig
+from puppetcli.run.outputs import KEY_OUTPUTS, write_key_outputs
+from puppetcli.run.warmup import warm_up
+from puppetcli.script.actions import GRIP_DEFAULTS
+from puppetcli.script.load import DEFAULT_MAX_FORCE, DEFAULT_MAX_TORQUE
 from puppetcli.spidar import DevicePreset, preset_from_option
-from puppetcli.warmup import warm_up
 from solver.errors import PuppetError
 from solver.model import Model, build_model
 from solver.spec import RigSpec
@@ -59,26 +60,15 @@ STEP_RANGE = (1e-4, 0.05)  # s: --h outside this is a mistake (or not real time)
     help="Address to listen on; anything but loopback lets other machines in.",
 )
 @click.option("--no-open", is_flag=True, help="Do not open the page in a browser.")
-@click.option(
-    "--h",
-    "step",
-    type=click.FloatRange(*STEP_RANGE),
-    default=None,
-    help="Physics step (s), overriding the rig's.",
-)
+@step_option("the rig's", click.FloatRange(*STEP_RANGE))
 @click.option(
     "--device",
     default=DEFAULT_DEVICE,
     show_default=True,
     help="The SPIDAR-G preset whose tension programme runs (name or preset YAML).",
 )
-@click.option(
-    "--view",
-    default="iso",
-    show_default=True,
-    help="Camera of the contact sheet: front, side, top, iso or custom:AZ,EL[,DIST].",
-)
-@click.option("--force", is_flag=True, help="Overwrite the session and its outputs.")
+@view_option("the contact sheet")
+@force_option("the session and its outputs")
 def command(
     rig: Path, session: Path | None, port: int, host: str, no_open: bool, step: float | None,
     device: str, view: str, force: bool,
@@ -96,8 +86,7 @@ def command(
     if session.suffix.lower() != ".mcap":
         raise OutputError(f"{session}: expected a session file name ending in .mcap, got "
                           f"'{session.suffix}'")  # fmt: skip
-    if (session.exists() or session.is_symlink()) and not force:
-        raise OutputError(f"{session} exists: pass --force to overwrite")
+    refuse_overwrite(session, force)
     parse_view(view)
     spec = load_rig(rig)
     dev = preset_from_option(device)

@@ -9,15 +9,23 @@ from pathlib import Path
 
 import click
 
+from puppetcli.commands.options import (
+    ENGINE_OPTION,
+    force_option,
+    order_option,
+    scale_option,
+    step_option,
+    view_option,
+)
 from puppetcli.errors import ScriptError
-from puppetcli.keyoutputs import write_key_outputs
+from puppetcli.mcap.replay import Replay, load_replay
 from puppetcli.outputs import prepare_outdir
-from puppetcli.replay import Replay, load_replay
-from puppetcli.rigfile import load_rig
-from puppetcli.runner import Runner, RunResult, script_model
-from puppetcli.runtrace import RunTrace
-from puppetcli.script import load_script
-from puppetcli.warmup import ENGINE_OPTION, prepare_engine
+from puppetcli.rig.load import load_rig
+from puppetcli.run.outputs import write_key_outputs
+from puppetcli.run.runner import Runner, RunResult, script_model
+from puppetcli.run.trace import RunTrace
+from puppetcli.run.warmup import prepare_engine
+from puppetcli.script.load import load_script
 from solver.model import build_model
 
 OUTPUTS = ["keyframes.json", "keyframes.bvh", "trace.mcap", "sheet.png", "keys"]
@@ -36,7 +44,7 @@ MAX_STEPS = 10_000_000  # a run longer than this is a mistake in the script (h o
     show_default=True,
     help="Output directory (created if missing).",
 )
-@click.option("--force", is_flag=True, help="Overwrite existing outputs in OUTDIR.")
+@force_option("existing outputs in OUTDIR")
 @click.option(
     "--trace-every",
     type=click.IntRange(min=1),
@@ -45,21 +53,9 @@ MAX_STEPS = 10_000_000  # a run longer than this is a mistake in the script (h o
     help="Write the trace every N steps.",
 )
 @click.option("--no-trace", is_flag=True, help="Do not write trace.mcap.")
-@click.option(
-    "--h",
-    "step",
-    type=click.FloatRange(min=0.0, min_open=True),
-    default=None,
-    help="Physics step (s), overriding the rig's and the script's or session's.",
-)
+@step_option("the rig's and the script's or session's")
 @click.option("--no-render", is_flag=True, help="Do not draw keys/NNN.png and sheet.png.")
-@click.option(
-    "--order",
-    default="ZXY",
-    show_default=True,
-    type=click.Choice(["ZXY", "ZYX", "XYZ", "XZY", "YXZ", "YZX"]),
-    help="Rotation channel order of keyframes.bvh.",
-)
+@order_option("keyframes.bvh")
 @click.option(
     "--fps",
     type=click.FloatRange(min=0.0, min_open=True),
@@ -74,19 +70,8 @@ MAX_STEPS = 10_000_000  # a run longer than this is a mistake in the script (h o
     show_default=True,
     help="keyframes.bvh: 'slerp' samples a timed motion at --fps between the keys.",
 )
-@click.option(
-    "--scale",
-    type=click.FloatRange(min=0.0, min_open=True),
-    default=1.0,
-    show_default=True,
-    help="keyframes.bvh: length unit factor (100 = centimetres).",
-)
-@click.option(
-    "--view",
-    default="iso",
-    show_default=True,
-    help="Camera for the pictures: front, side, top, iso or custom:AZ,EL[,DIST].",
-)
+@scale_option("keyframes.bvh: length unit factor (100 = centimetres).")
+@view_option("the pictures")
 @ENGINE_OPTION
 def command(
     rig: Path,
@@ -129,8 +114,9 @@ def command(
     model, upgrade = prepare_engine(model, engine, rig)
     result = _run(model, plan, outdir, trace_every, no_trace, replay, upgrade)
     write_key_outputs(
-        outdir, spec, model.name, list(result.keys), render=not no_render, order=order, fps=fps,
-        scale=scale, interpolate=None if interpolate == "none" else interpolate, view=view,
+        outdir, spec, model.name, list(result.keys), render=not no_render, order=order.upper(),
+        fps=fps, scale=scale, interpolate=None if interpolate == "none" else interpolate,
+        view=view,
     )  # fmt: skip
     _report(result, model.options.h)
     if result.error is not None:

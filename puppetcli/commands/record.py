@@ -6,12 +6,13 @@ from pathlib import Path
 
 import click
 
+from puppetcli.commands.options import force_option
 from puppetcli.errors import SessionError
-from puppetcli.outputs import OutputError
-from puppetcli.record import record_session
-from puppetcli.rigfile import load_rig
-from puppetcli.script import load_script
-from puppetcli.session import write_session
+from puppetcli.mcap.record import record_session
+from puppetcli.mcap.session import write_session
+from puppetcli.outputs import make_parent, refuse_overwrite
+from puppetcli.rig.load import load_rig
+from puppetcli.script.load import load_script
 from puppetcli.spidar import preset_from_option
 
 DEFAULT_DEVICE = "SpidarG6X3R"
@@ -35,7 +36,7 @@ DEFAULT_DEVICE = "SpidarG6X3R"
 )  # fmt: skip
 @click.option("--seed", type=int, default=0, show_default=True, help="Seed of the count noise.")
 @click.option("--with-pose", is_flag=True, help="Also store the true grip pose (/spidar/pose).")
-@click.option("--force", is_flag=True, help="Overwrite SESSION.mcap if it exists.")
+@force_option("SESSION.mcap if it exists")
 def command(
     rig: Path, script: Path, out: Path, device: str, noise: float, seed: int, with_pose: bool,
     force: bool,
@@ -52,17 +53,13 @@ def command(
         raise SessionError(
             f"{out}: expected a session file name ending in .mcap, got '{out.suffix}'"
         )
-    if (out.exists() or out.is_symlink()) and not force:
-        raise OutputError(f"{out} exists: pass --force to overwrite")
+    refuse_overwrite(out, force)
     spec = load_rig(rig)
     plan = load_script(script, spec)
     session = record_session(
         spec, plan, preset_from_option(device), noise, seed, store_pose=with_pose
     )
-    try:
-        out.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise OutputError(f"{out.parent}: cannot create directory: {exc.strerror}") from exc
+    make_parent(out)
     write_session(out, session)
     ws = session.workspace
     how = "fitted to 80 % of the reach" if ws.fitted else "from the script"

@@ -9,14 +9,21 @@ from pathlib import Path
 
 import click
 
-from puppetcli.outputs import OutputError
-from puppetcli.render import contact_sheet, default_cols, frame_poses, render_pose, write_png
-from puppetcli.render_camera import RenderError, parse_size, parse_view
-from puppetcli.render_inputs import input_kind, key_poses, trace_poses
-from puppetcli.replay import replay_traced
-from puppetcli.rigfile import load_rig
-from puppetcli.session import is_session
-from puppetcli.skeleton import Skeleton
+from puppetcli.commands.options import force_option, view_option
+from puppetcli.mcap.replay import replay_traced
+from puppetcli.mcap.session import is_session
+from puppetcli.outputs import make_parent, refuse_overwrite
+from puppetcli.render.camera import RenderError, parse_size, parse_view
+from puppetcli.render.inputs import input_kind, key_poses, trace_poses
+from puppetcli.render.picture import (
+    contact_sheet,
+    default_cols,
+    frame_poses,
+    render_pose,
+    write_png,
+)
+from puppetcli.rig.load import load_rig
+from puppetcli.rig.skeleton import Skeleton
 
 
 @click.command("render")
@@ -34,13 +41,7 @@ from puppetcli.skeleton import Skeleton
     help="Rig file of the poses (bone shapes, props, ground). Required.",
 )
 @click.option("--cols", type=int, help="Columns of the sheet [default: up to 4, then ~square].")
-@click.option(
-    "--view",
-    default="iso",
-    show_default=True,
-    help="front (from +z), side (from +x), top (from +y), iso, or custom:AZ,EL[,DIST] "
-    "(degrees, m).",
-)
+@view_option("the pictures (front from +z, side from +x, top from +y)")
 @click.option("--size", default="480x480", show_default=True, help="Panel size WIDTHxHEIGHT, px.")
 @click.option(
     "--video",
@@ -48,7 +49,7 @@ from puppetcli.skeleton import Skeleton
     help="With a trace or session .mcap INPUT: a video of every step (.mp4 mp4v or .avi MJPG).",
 )
 @click.option("--fps", type=float, default=30.0, show_default=True, help="Video frame rate.")
-@click.option("--force", is_flag=True, help="Overwrite existing output files.")
+@force_option("existing output files")
 def command(
     input_path: Path,
     sheet: Path | None,
@@ -81,7 +82,7 @@ def command(
     if sheet is not None:
         framing = frame_poses(skel, poses, spec, camera_view, panel)
         ncols = cols if cols is not None else default_cols(len(poses))
-        _mkdir(sheet)
+        make_parent(sheet)
         write_png(sheet, contact_sheet([render_pose(skel, p, spec, framing) for p in poses], ncols))
         rows = -(-len(poses) // min(ncols, len(poses)))
         click.echo(f"{sheet}: {len(poses)} panels, {min(ncols, len(poses))} × {rows}, "
@@ -114,8 +115,8 @@ def _check_request(
     if not 1.0 <= fps <= 240.0:
         raise RenderError(f"--fps: expected 1 … 240 frames per second, got {fps:g}")
     for out in (sheet, video):
-        if out is not None and not force and (out.exists() or out.is_symlink()):
-            raise OutputError(f"{out} exists: pass --force to overwrite")
+        if out is not None:
+            refuse_overwrite(out, force)
     return kind
 
 
@@ -130,17 +131,10 @@ def _session_poses(path: Path, spec, skel: Skeleton):
         return trace_poses(Path(tmp) / "trace.mcap", skel)
 
 
-def _mkdir(path: Path) -> None:
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise OutputError(f"{path.parent}: cannot create directory: {exc.strerror}") from exc
-
-
 def _video(path: Path, skel, steps, spec, framing, fps: float) -> None:
-    from puppetcli.render_video import frame_indices, write_video
+    from puppetcli.render.video import frame_indices, write_video
 
-    _mkdir(path)
+    make_parent(path)
     total = len(frame_indices([p.time for p in steps], fps))
     with _progress(total) as tick:
         n = write_video(path, skel, steps, spec, framing, fps, tick)

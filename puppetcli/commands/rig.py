@@ -6,10 +6,11 @@ from pathlib import Path
 
 import click
 
-from puppetcli.bvh_read import read_bvh
-from puppetcli.bvh_rig import auto_scale, check_frame, describe_scale, rig_text_from_bvh
-from puppetcli.outputs import OutputError, write_text_atomic
-from puppetcli.rigfile import rig_from_text
+from puppetcli.bvh.read import read_bvh
+from puppetcli.bvh.rig import auto_scale, check_frame, describe_scale, rig_text_from_bvh
+from puppetcli.commands.options import force_option
+from puppetcli.outputs import refuse_overwrite, write_text_atomic
+from puppetcli.rig.load import rig_from_text
 from solver.model import build_model
 
 
@@ -40,7 +41,7 @@ def command() -> None:
     default=None,
     help="Metres per file unit [default: 0.01 if the skeleton is taller than 10 units, else 1].",
 )
-@click.option("--force", is_flag=True, help="Overwrite RIG.yaml if it exists.")
+@force_option("RIG.yaml if it exists")
 def from_bvh(
     bvh_file: Path, out: Path, frame: int | None, scale: float | None, force: bool
 ) -> None:
@@ -51,8 +52,7 @@ def from_bvh(
     example doll's joint settings (strengthened where a joint carries a heavy
     subtree) and a fixed root.  See docs/bvh.md.
     """
-    if (out.exists() or out.is_symlink()) and not force:
-        raise OutputError(f"{out} exists: pass --force to overwrite")
+    refuse_overwrite(out, force)
     bvh = read_bvh(bvh_file)
     check_frame(bvh, frame)
     if scale is None:

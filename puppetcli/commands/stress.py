@@ -10,9 +10,9 @@ from pathlib import Path
 
 import click
 
+from puppetcli.bench.stress import CASES, RANDOM, RANDOM_SEEDS, CaseResult, run_cases
 from puppetcli.outputs import write_text_atomic
-from puppetcli.rigfile import SOLVER_METHODS
-from puppetcli.stress import CASES, RANDOM, RANDOM_SEEDS, CaseResult, run_cases
+from puppetcli.rig.load import SOLVER_METHODS
 
 
 @click.command("stress")

@@ -7,7 +7,7 @@ from pathlib import Path
 import click
 import numpy as np
 
-from puppetcli.rigfile import load_rig
+from puppetcli.rig.load import load_rig
 from solver.model import Model, build_model
 
 

@@ -29,14 +29,14 @@ from dataclasses import dataclass
 import numpy as np
 
 from puppetcli.live.track import LiveTrack, PointerFilter, device_from_world
-from puppetcli.replay import EventActions, Replay, SessionRunner, session_script
-from puppetcli.runner import script_model
-from puppetcli.runtrace import tensions_message, wrench_message
-from puppetcli.script import DEFAULT_LOWPASS, DEFAULT_MAX_FORCE, DEFAULT_MAX_TORQUE
-from puppetcli.script_actions import GRIP_DEFAULTS
-from puppetcli.session import TICK, Event, Session, SessionWriter, Workspace
+from puppetcli.mcap.replay import EventActions, Replay, SessionRunner, session_script
+from puppetcli.mcap.session import TICK, Event, Session, SessionWriter, Workspace
+from puppetcli.run.runner import script_model
+from puppetcli.run.trace import tensions_message, wrench_message
+from puppetcli.run.warmup import compile_engine
+from puppetcli.script.actions import GRIP_DEFAULTS
+from puppetcli.script.load import DEFAULT_LOWPASS, DEFAULT_MAX_FORCE, DEFAULT_MAX_TORQUE
 from puppetcli.spidar import DevicePreset, TensionDistributor
-from puppetcli.warmup import compile_engine
 from solver import quat
 from solver.model import Model, build_model
 from solver.rows.grip import nearest_point

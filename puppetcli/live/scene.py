@@ -3,15 +3,15 @@
 Shapes are the rig's visual shapes, one per bone (``solver.model``'s collision shapes,
 also for bones that do not collide) and one per prop, in their body's frame (static
 props: the world), so that the page places them with the streamed body poses.  Colours
-are the OpenCV renders' (``puppetcli.render_scene``), so the page looks like the pictures.
+are the OpenCV renders' (``puppetcli.render.scene``), so the page looks like the pictures.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from puppetcli import render as render_module
-from puppetcli import render_scene as look
+from puppetcli.render import picture as render_module
+from puppetcli.render import scene as look
 from solver import quat
 from solver.massprops import shape_frame
 from solver.model import Model

@@ -22,7 +22,6 @@ import asyncio
 import contextlib
 import hmac
 import importlib.resources
-import json
 import signal
 import time
 from collections.abc import Callable
@@ -31,6 +30,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from aiohttp import WSMsgType, web
 
+from puppetcli.jsontext import json_bytes
 from puppetcli.live import protocol
 from puppetcli.live.clock import RealTimeClock
 from puppetcli.live.recording import LiveRecording, NothingInReach
@@ -131,7 +131,7 @@ class LiveServer:
         self.pages.append(page)
         self._seen_page, self._empty_since = True, None
         try:
-            await ws.send_str(json.dumps(self._hello()))
+            await ws.send_str(json_bytes(self._hello()).decode())
             async for msg in ws:
                 if msg.type == WSMsgType.TEXT:
                     await self._receive(page, msg.data)
@@ -298,7 +298,7 @@ async def _send(page: _Page, message: dict) -> None:
     if page.ws.closed or (transport is not None and transport.get_write_buffer_size() > 1 << 20):
         return
     with contextlib.suppress(ConnectionError, RuntimeError):
-        await page.ws.send_str(json.dumps(message, allow_nan=False))
+        await page.ws.send_str(json_bytes(message).decode())
 
 
 def _key_list(live: LiveRecording) -> list[tuple[str, float]]:

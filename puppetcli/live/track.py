@@ -19,8 +19,8 @@ import math
 
 import numpy as np
 
-from puppetcli.replay import TrackLookup
-from puppetcli.session import TICK, Workspace
+from puppetcli.mcap.replay import TrackLookup
+from puppetcli.mcap.session import TICK, Workspace
 from solver import quat1
 
 __all__ = ["SMOOTHING", "LiveTrack", "PointerFilter", "device_from_world"]

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from puppetcli.rigfile import load_rig, rig_from_text
+from puppetcli.rig.load import load_rig, rig_from_text
 from solver import quat
 from solver.model import build_model
 from solver.observe import joint_rotations

@@ -10,8 +10,8 @@ from bvh import Bvh
 from click.testing import CliRunner
 
 from puppetcli.cli import cli
-from puppetcli.keyframes import read_keyframes
-from puppetcli.trace import read_trace
+from puppetcli.mcap.trace import read_trace
+from puppetcli.run.keyframes import read_keyframes
 
 ROOT = Path(__file__).resolve().parents[2]
 DOLL_SCRIPTS = ["wave", "head_twist", "kneel", "hand_on_table", "free_push", "arm_push"]

@@ -9,8 +9,8 @@ from click.testing import CliRunner
 from paper_experiment import T_END, T_LOAD, recursion
 
 from puppetcli.cli import cli
-from puppetcli.keyframes import read_keyframes
-from puppetcli.trace import read_trace
+from puppetcli.mcap.trace import read_trace
+from puppetcli.run.keyframes import read_keyframes
 from solver import quat
 
 ROOT = Path(__file__).resolve().parents[2]

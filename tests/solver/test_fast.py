@@ -18,8 +18,8 @@ import pytest
 from paper_experiment import DD, DF, INERTIA, KF, T_END, T_LOAD, TAU, recursion
 from rigbuild import chain, one_bone, rheology
 
-from puppetcli.bench_solver import scene_inputs
-from puppetcli.rigfile import load_rig
+from puppetcli.bench.stages import scene_inputs
+from puppetcli.rig.load import load_rig
 from solver import quat
 from solver.advance.stabilize import project_joints
 from solver.compiled.fast import supports
@@ -167,7 +167,7 @@ def test_tumbling_chain_with_joint_projection_matches(monkeypatch):
 
 
 def doll_inputs(model, steps: int) -> tuple:
-    """Push + grip for the first half (puppetcli.bench_solver's scene), then a free-mode
+    """Push + grip for the first half (puppetcli.bench.stages's scene), then a free-mode
     pointer sphere pressing down on the left forearm."""
     state, inputs = scene_inputs(model, steps // 2)
     b = model.bone_names.index("forearm_l")

@@ -23,7 +23,7 @@ from numba.core.runtime import _nrt_python, rtsys
 from rigbuild import chain
 from test_fast import box_chain, doll_inputs, lying_chain
 
-from puppetcli.rigfile import load_rig
+from puppetcli.rig.load import load_rig
 from solver.compiled.pack import pack
 from solver.compiled.sim import Sim
 from solver.engine import Engine

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 from rigbuild import chain
 
-from puppetcli.rigfile import load_rig
+from puppetcli.rig.load import load_rig
 from solver.compiled import layout
 from solver.compiled.flat import flatten
 from solver.compiled.layout import IOpt, Opt, Packed, leaf_count

@@ -11,6 +11,7 @@ import pytest
 from rigbuild import chain, rheology
 from test_solvers import contact_scene, lcp_violation, problem, run_pgs
 
+from puppetcli.bench.stress_scenes import free_bodies
 from solver import quat
 from solver.model import build_model
 from solver.pipeline import step
@@ -22,7 +23,6 @@ from solver.solve.reference import reference_solve
 from solver.solve.response import dense_system
 from solver.spec import ShapeSpec
 from solver.state import StepInput, initial_state
-from solver.stress_cases import free_bodies
 
 
 def velocities(rows, resp, vel_free, lam):

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from puppetcli.rigfile import load_rig
+from puppetcli.rig.load import load_rig
 from solver.advance.monitor import check_state
 from solver.errors import SimulationError
 from solver.model import build_model

@@ -12,8 +12,8 @@ import pytest
 from rigbuild import chain
 from test_fast import box_chain, doll_inputs
 
-from puppetcli.bench import doll_scenes
-from puppetcli.rigfile import load_rig
+from puppetcli.bench.solvers import doll_scenes
+from puppetcli.rig.load import load_rig
 from solver.compiled.pack import pack
 from solver.compiled.sim import Sim
 from solver.engine import Engine

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from test_fast import doll_inputs
 
-from puppetcli.rigfile import load_rig
+from puppetcli.rig.load import load_rig
 from solver.engine import Engine
 from solver.model import build_model
 from solver.state import initial_state

@@ -10,14 +10,15 @@ import numpy as np
 import pytest
 from test_fast import lockstep
 
-from puppetcli.bench import doll_scenes, grip_inputs
+from puppetcli.bench.scenes import grip_inputs
+from puppetcli.bench.solvers import doll_scenes
+from puppetcli.bench.stress_scenes import free_bodies
 from solver import quat
 from solver.advance.sleep import body_islands
 from solver.engine import Engine
 from solver.rows.grip import Pointer
 from solver.spec import ShapeSpec
 from solver.state import StepInput, initial_state
-from solver.stress_cases import free_bodies
 
 DOLL = Path(__file__).resolve().parents[2] / "rigs" / "doll.yaml"
 LEGS = ("thigh_l", "shin_l", "foot_l", "thigh_r", "shin_r", "foot_r")

@@ -1,4 +1,4 @@
-"""Stress cases (issue 6): every case stays stable within its bounds (puppetcli.stress).
+"""Stress cases (issue 6): every case stays stable within its bounds (puppetcli.bench.stress).
 
 The bounds and their reasons are in each scene (``Scene.why``) and in docs/stress.md.
 The cases run on the compiled step with each scene's own solver (auto: direct, or the
@@ -16,10 +16,10 @@ import pytest
 from click.testing import CliRunner
 from mcap.reader import make_reader
 
-from puppetcli import stress
+from puppetcli.bench import stress
+from puppetcli.bench.stress_scenes import Scene
 from puppetcli.cli import cli
 from solver.pipeline import step
-from solver.stress_cases import Scene
 
 ROOT = Path(__file__).resolve().parents[2]
 

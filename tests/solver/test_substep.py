@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from rigbuild import chain
 
-from puppetcli import stress
+from puppetcli.bench import stress
 from solver import quat
 from solver.advance.substep import SAFE_RATE, model_substeps, pointer_at, run_substeps
 from solver.engine import Engine

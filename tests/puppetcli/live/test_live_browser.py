@@ -16,10 +16,10 @@ import pytest
 from click.testing import CliRunner
 from liveproc import DOLL, ROOT, Live
 
-from puppetcli import bench_live
+from puppetcli.bench import live as bench_live
 from puppetcli.cli import cli
-from puppetcli.keyframes import read_keyframes
-from puppetcli.session import read_session
+from puppetcli.mcap.session import read_session
+from puppetcli.run.keyframes import read_keyframes
 
 CHROMIUM = shutil.which("chromium") or bench_live.CHROMIUM
 FLAGS = bench_live.CHROMIUM_FLAGS

@@ -15,11 +15,11 @@ from click.testing import CliRunner
 from mcap.reader import make_reader
 
 from puppetcli.cli import cli
-from puppetcli.keyframes import read_keyframes
 from puppetcli.live.recording import Grip, Key, LiveRecording, Release, Touch, Undo
-from puppetcli.record import fit_workspace
-from puppetcli.rigfile import load_rig
-from puppetcli.session import is_session, read_session
+from puppetcli.mcap.record import fit_workspace
+from puppetcli.mcap.session import is_session, read_session
+from puppetcli.rig.load import load_rig
+from puppetcli.run.keyframes import read_keyframes
 from puppetcli.spidar import preset
 from solver.observe import bone_heads, bone_tails
 

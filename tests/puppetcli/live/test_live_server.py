@@ -21,8 +21,8 @@ from click.testing import CliRunner
 from liveproc import DOLL, Live
 
 from puppetcli.cli import cli
-from puppetcli.keyframes import read_keyframes
 from puppetcli.live.server import GRACE
+from puppetcli.run.keyframes import read_keyframes
 
 
 async def frames_until(ws, predicate, limit: float = 10.0) -> dict:
@@ -228,7 +228,7 @@ def test_bad_options_are_one_line_before_anything_starts(tmp_path, args, expecte
 
 
 def test_the_live_benchmark_reports_every_figure():
-    from puppetcli.bench_live import format_live, measure_live
+    from puppetcli.bench.live import format_live, measure_live
 
     (row,) = measure_live([0.005], seconds=1.5, browser=False)
     values = [row.rtf, row.headroom, row.step_us, row.fps, row.latency_p50, row.latency_p95]

@@ -9,8 +9,8 @@ import numpy as np
 
 from puppetcli.live import track
 from puppetcli.live.track import LiveTrack, PointerFilter, device_from_world
-from puppetcli.replay import DeviceTrack
-from puppetcli.session import TICK, Workspace
+from puppetcli.mcap.replay import DeviceTrack
+from puppetcli.mcap.session import TICK, Workspace
 from solver import quat
 
 

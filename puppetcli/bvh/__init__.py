@@ -1,0 +1,3 @@
+"""BVH skeletons and motions: the types and their maths (``model``), reading, writing, and
+rigs made from a BVH skeleton.
+"""

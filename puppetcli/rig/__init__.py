@@ -1,0 +1,1 @@
+"""Rig files: loading and checking a rig's YAML, and the skeleton it describes."""

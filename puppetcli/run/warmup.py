@@ -1,0 +1,184 @@
+"""The first run on a machine: numba compiles the solver (2-3 minutes) and caches it.
+
+A command picks the engine its run steps with (``prepare_engine``; the ``--engine``
+option of puppetcli.commands.options, or ``PUPPETCLI_ENGINE``):
+
+- ``auto`` (the default): the compiled step when it is built; otherwise the build starts in
+  a detached background process (``python -m puppetcli.run.warmup RIG``, one at a time) and this
+  run starts on the numpy step (``solver.pipeline``), moving to the compiled step between two
+  actions as soon as the build is done (``Runner.upgrade``).  The two give the same states to
+  rounding: the example scripts' keys agree within 1e-9 (tests/puppetcli/run/test_warmup.py).
+- ``compiled``: wait for the compiled step (saying once that it is compiling, and how long
+  it took, when that takes more than ``NOTICE_AFTER`` s); compiling is never counted as
+  simulation (steps/s, a progress bar's estimate).
+- ``numpy``: the numpy step throughout.
+
+A finished build leaves a marker beside numba's cache of the step, named with the stamp of
+the solver's sources (``solver.jit.fingerprint``): an edit of the solver makes it stale.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import click
+
+__all__ = [
+    "ENGINES", "NOTICE_AFTER", "compile_engine", "compiled_ready",
+    "load_stepper", "prepare_engine", "start_build", "warm_up", "warm_up_step",
+]  # fmt: skip
+
+ENGINES = ("auto", "compiled", "numpy")
+NOTICE_AFTER = 2.0  # s: loading the cache takes ~0.3 s; longer means compiling
+COMPILING = (
+    "compiling the solver: the first run on this machine takes 2-3 minutes "
+    "(later runs load it in under a second)"
+)
+BUILDING = (
+    "first run on this machine: the compiled solver is being built in the background "
+    "(2-3 minutes); until it is ready this run steps with the numpy solver, which is slower "
+    "and gives the same keys to 1e-9"
+)
+
+
+def warm_up(prepare: Callable[[], object]) -> None:
+    """Run ``prepare``; announce a compile that takes long (module docstring)."""
+    notice = threading.Timer(NOTICE_AFTER, lambda: click.echo(COMPILING, err=True))
+    notice.daemon = True
+    notice.start()
+    started = time.perf_counter()
+    try:
+        prepare()
+    finally:
+        notice.cancel()
+    took = time.perf_counter() - started
+    if took > NOTICE_AFTER:
+        click.echo(f"solver ready ({took:.0f} s)", err=True)
+
+
+def compile_engine(model) -> None:
+    """One throwaway step of ``model`` from rest on each of its compiled engine's paths, in
+    place (a run's steps), along a path (a batch of them) and to a new State (a step the
+    stepper hands back): numba compiles or loads them now rather than in the middle of a
+    run.  Marks the build done (``compiled_ready``)."""
+    import numpy as np
+
+    from solver.engine import Engine
+    from solver.state import initial_state
+
+    engine = Engine(model.with_options(engine="compiled"))
+    stepper = engine.stepper()
+    stepper.advance()
+    path = (np.zeros((1, 3)), np.tile([1.0, 0.0, 0.0, 0.0], (1, 1)), np.zeros((1, 3)))
+    stepper.follow((*path, np.zeros((1, 3))), 0.0, None, np.empty((1, 9)))
+    engine.step(initial_state(model))
+    _marker().touch()
+
+
+def load_stepper(model) -> None:
+    """One throwaway in-place step of ``model`` on the compiled engine: loads what a run's
+    steps need from numba's cache (numba's own start-up, ~0.5 s, and the step), not the
+    paths a run rarely takes (a step handed back: loaded when one is)."""
+    from solver.engine import Engine
+
+    Engine(model.with_options(engine="compiled")).stepper().advance()
+
+
+def warm_up_step(model) -> None:
+    """``warm_up`` of ``compile_engine(model)``."""
+    warm_up(lambda: compile_engine(model))
+
+
+def compiled_ready() -> bool:
+    """The compiled step of the current solver sources is built (module docstring)."""
+    return _marker().exists()
+
+
+def prepare_engine(model, engine: str, rig: Path) -> tuple:
+    """(``model`` with the engine its run starts on, the run's ``Runner.upgrade`` check or
+    None) for ``engine``, one of ENGINES, the compiled step loaded or built (module
+    docstring); ``rig`` is the rig file a background build compiles with."""
+    if engine == "numpy":
+        return model.with_options(engine="numpy"), None
+    if compiled_ready():
+        warm_up(lambda: load_stepper(model))
+        return model.with_options(engine="compiled"), None
+    if engine == "compiled":
+        warm_up_step(model)
+        return model.with_options(engine="compiled"), None
+    start_build(rig)
+    click.echo(BUILDING, err=True)
+    return model.with_options(engine="numpy"), compiled_ready
+
+
+def start_build(rig: Path) -> bool:
+    """Start the background build with ``rig`` unless one is running (a lock beside the
+    marker holds its process id); True when this call started it."""
+    lock = _marker().with_suffix(".building")
+    if _running(lock):
+        return False
+    with contextlib.suppress(FileNotFoundError):
+        lock.unlink()
+    try:
+        fd = os.open(lock, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+    except FileExistsError:  # another run took it first
+        return False
+    except OSError:  # no place for a lock: build anyway
+        fd = None
+    child = subprocess.Popen(
+        [sys.executable, "-m", "puppetcli.run.warmup", str(Path(rig).resolve())],
+        stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )  # fmt: skip
+    if fd is not None:
+        os.write(fd, str(child.pid).encode())
+        os.close(fd)
+    return True
+
+
+def _running(lock: Path) -> bool:
+    """A build holds ``lock``: the lock names a live process."""
+    try:
+        pid = int(lock.read_text() or "0")
+    except (OSError, ValueError):
+        return False
+    if pid <= 0:
+        return lock.exists() and time.time() - lock.stat().st_mtime < 5.0  # pid not written yet
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def _marker() -> Path:
+    """The build's marker: beside numba's cache of the step, named by the sources' stamp."""
+    from solver.compiled.kernel import step_kernel
+    from solver.jit import fingerprint
+
+    return Path(step_kernel._cache._cache_path) / f"puppetcli-built-{fingerprint()[:16]}"
+
+
+def _build(rig: str) -> None:
+    """The background build (``start_build``): compile with the rig, then drop the lock."""
+    from puppetcli.rig.load import load_rig
+    from solver.model import build_model
+
+    try:
+        compile_engine(build_model(load_rig(Path(rig))))
+    finally:
+        with contextlib.suppress(OSError):
+            _marker().with_suffix(".building").unlink()
+
+
+if __name__ == "__main__":
+    _build(sys.argv[1])

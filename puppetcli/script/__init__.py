@@ -1,0 +1,1 @@
+"""Manipulation scripts: the file, its actions, and the expectations checked after a run."""
