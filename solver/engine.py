@@ -40,9 +40,11 @@ class Engine:
         self.model = model
         self.packed = None
         if model.options.engine == "compiled":
-            from solver.compiled.pack import pack  # numba loads only for the compiled step
+            from solver.compiled.fast import fast_step  # numba loads only for the compiled step
+            from solver.compiled.pack import pack
 
             self.packed = pack(model)
+            self._fast_step = fast_step  # (an import in ``step`` would cost ~1 µs a step)
 
     @property
     def compiled(self) -> bool:
@@ -53,9 +55,7 @@ class Engine:
         """One step of size model.options.h from ``state``: (new State, its report)."""
         if self.packed is None:
             return pipeline.step(self.model, state, inp)
-        from solver.compiled.fast import fast_step
-
-        return fast_step(self.packed, state, inp)
+        return self._fast_step(self.packed, state, inp)
 
     def stepper(self, state: State | None = None):
         """An in-place stepper from ``state`` (the rest state when None)."""

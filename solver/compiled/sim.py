@@ -27,7 +27,17 @@ from __future__ import annotations
 import numpy as np
 
 from solver.compiled.entry import inplace_kernel
-from solver.compiled.fast import _NO_INPUT, _input_arrays, entry_point, fast_step, kernel_report
+from solver.compiled.fast import (
+    _NO_INPUT,
+    GRIP_FORCE,
+    GRIP_TORQUE,
+    TOUCH_FORCE,
+    WRENCH,
+    _input_arrays,
+    entry_point,
+    fast_step,
+    kernel_report,
+)  # fmt: skip
 from solver.compiled.flat import flatten
 from solver.compiled.kernel import step_arrays
 from solver.compiled.layout import (
@@ -121,14 +131,13 @@ class Sim:
         if self._handed_back is not None:
             r = self._handed_back
             return r.grip_force, r.grip_torque, r.touch_force
-        f, at = self._rep_f, ReportFloat
-        return (f[at.grip_force : at.grip_torque], f[at.grip_torque : at.touch_force],
-                f[at.touch_force : at.SIZE])  # fmt: skip
+        f = self._rep_f
+        return f[GRIP_FORCE], f[GRIP_TORQUE], f[TOUCH_FORCE]
 
     def wrench_into(self, out: np.ndarray) -> None:
         """Write the last step's (grip force, grip torque, touch force) into out (9,)."""
         if self._handed_back is None:
-            out[:] = self._rep_f[ReportFloat.grip_force :]
+            out[:] = self._rep_f[WRENCH]
         else:
             out[:] = np.concatenate(self.wrench())
 
@@ -168,7 +177,7 @@ class Sim:
             pvec[:] = poses[k]
             if kernel(flat, self._phase, ins)[0] == OK:
                 self._stepped()
-                wrench[k] = rep[ReportFloat.grip_force :]
+                wrench[k] = rep[WRENCH]
             else:
                 self._hand_back(path_input(path, k, radius, coupling))
                 self.wrench_into(wrench[k])
