@@ -32,7 +32,7 @@ import click
 
 __all__ = [
     "ENGINES", "NOTICE_AFTER", "compile_engine", "compiled_ready",
-    "load_stepper", "prepare_engine", "start_build", "warm_up", "warm_up_step",
+    "first_step", "prepare_engine", "start_build", "warm_up", "warm_up_step",
 ]  # fmt: skip
 
 ENGINES = ("auto", "compiled", "numpy")
@@ -41,6 +41,7 @@ COMPILING = (
     "compiling the solver: the first run on this machine takes 2-3 minutes "
     "(later runs load it in under a second)"
 )
+COMPILING_NUMPY = "compiling the kernels the numpy solver shares with the compiled one (seconds)"
 BUILDING = (
     "first run on this machine: the compiled solver is being built in the background "
     "(2-3 minutes); until it is ready this run steps with the numpy solver, which is slower "
@@ -48,9 +49,10 @@ BUILDING = (
 )
 
 
-def warm_up(prepare: Callable[[], object]) -> None:
-    """Run ``prepare``; announce a compile that takes long (module docstring)."""
-    notice = threading.Timer(NOTICE_AFTER, lambda: click.echo(COMPILING, err=True))
+def warm_up(prepare: Callable[[], object], compiling: str = COMPILING) -> None:
+    """Run ``prepare``; announce a compile that takes long (module docstring) with the line
+    ``compiling``."""
+    notice = threading.Timer(NOTICE_AFTER, lambda: click.echo(compiling, err=True))
     notice.daemon = True
     notice.start()
     started = time.perf_counter()
@@ -82,13 +84,13 @@ def compile_engine(model) -> None:
     _marker().touch()
 
 
-def load_stepper(model) -> None:
-    """One throwaway in-place step of ``model`` on the compiled engine: loads what a run's
-    steps need from numba's cache (numba's own start-up, ~0.5 s, and the step), not the
-    paths a run rarely takes (a step handed back: loaded when one is)."""
+def first_step(model) -> None:
+    """One throwaway in-place step of ``model`` on its engine: loads (or, for the numpy
+    step's shared kernels, compiles) what a run's steps need now, not in the first timed
+    step; the compiled step's rare paths (a step handed back) load when one happens."""
     from solver.engine import Engine
 
-    Engine(model.with_options(engine="compiled")).stepper().advance()
+    Engine(model).stepper().advance()
 
 
 def warm_up_step(model) -> None:
@@ -105,17 +107,20 @@ def prepare_engine(model, engine: str, rig: Path) -> tuple:
     """(``model`` with the engine its run starts on, the run's ``Runner.upgrade`` check or
     None) for ``engine``, one of ENGINES, the compiled step loaded or built (module
     docstring); ``rig`` is the rig file a background build compiles with."""
+    numpy, compiled = model.with_options(engine="numpy"), model.with_options(engine="compiled")
     if engine == "numpy":
-        return model.with_options(engine="numpy"), None
+        warm_up(lambda: first_step(numpy), COMPILING_NUMPY)
+        return numpy, None
     if compiled_ready():
-        warm_up(lambda: load_stepper(model))
-        return model.with_options(engine="compiled"), None
+        warm_up(lambda: first_step(compiled))
+        return compiled, None
     if engine == "compiled":
         warm_up_step(model)
-        return model.with_options(engine="compiled"), None
+        return compiled, None
     start_build(rig)
     click.echo(BUILDING, err=True)
-    return model.with_options(engine="numpy"), compiled_ready
+    warm_up(lambda: first_step(numpy), COMPILING_NUMPY)
+    return numpy, compiled_ready
 
 
 def start_build(rig: Path) -> bool:

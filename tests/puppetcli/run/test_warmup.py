@@ -100,7 +100,7 @@ def test_auto_starts_on_numpy_until_built(monkeypatch, capsys):
     monkeypatch.setattr(warmup, "compiled_ready", lambda: built[0])
     monkeypatch.setattr(warmup, "start_build", started.append)
     monkeypatch.setattr(warmup, "warm_up_step", lambda model: None)
-    monkeypatch.setattr(warmup, "load_stepper", lambda model: None)
+    monkeypatch.setattr(warmup, "first_step", lambda model: None)
     model = build_model(load_rig(ROOT / "rigs/doll.yaml"))
     rig = ROOT / "rigs/doll.yaml"
     first, upgrade = warmup.prepare_engine(model, "auto", rig)
