@@ -42,6 +42,7 @@ COMPILING = (
     "(later runs load it in under a second)"
 )
 COMPILING_NUMPY = "compiling the kernels the numpy solver shares with the compiled one (seconds)"
+NUMPY_READY = "numpy solver ready"
 BUILDING = (
     "first run on this machine: the compiled solver is being built in the background "
     "(2-3 minutes); until it is ready this run steps with the numpy solver, which is slower "
@@ -49,9 +50,11 @@ BUILDING = (
 )
 
 
-def warm_up(prepare: Callable[[], object], compiling: str = COMPILING) -> None:
+def warm_up(
+    prepare: Callable[[], object], compiling: str = COMPILING, ready: str = "solver ready"
+) -> None:
     """Run ``prepare``; announce a compile that takes long (module docstring) with the line
-    ``compiling``."""
+    ``compiling``, then ``ready`` and how long it took."""
     notice = threading.Timer(NOTICE_AFTER, lambda: click.echo(compiling, err=True))
     notice.daemon = True
     notice.start()
@@ -62,7 +65,7 @@ def warm_up(prepare: Callable[[], object], compiling: str = COMPILING) -> None:
         notice.cancel()
     took = time.perf_counter() - started
     if took > NOTICE_AFTER:
-        click.echo(f"solver ready ({took:.0f} s)", err=True)
+        click.echo(f"{ready} ({took:.0f} s)", err=True)
 
 
 def compile_engine(model) -> None:
@@ -109,7 +112,7 @@ def prepare_engine(model, engine: str, rig: Path) -> tuple:
     docstring); ``rig`` is the rig file a background build compiles with."""
     numpy, compiled = model.with_options(engine="numpy"), model.with_options(engine="compiled")
     if engine == "numpy":
-        warm_up(lambda: first_step(numpy), COMPILING_NUMPY)
+        warm_up(lambda: first_step(numpy), COMPILING_NUMPY, NUMPY_READY)
         return numpy, None
     if compiled_ready():
         warm_up(lambda: first_step(compiled))
@@ -119,7 +122,7 @@ def prepare_engine(model, engine: str, rig: Path) -> tuple:
         return compiled, None
     start_build(rig)
     click.echo(BUILDING, err=True)
-    warm_up(lambda: first_step(numpy), COMPILING_NUMPY)
+    warm_up(lambda: first_step(numpy), COMPILING_NUMPY, NUMPY_READY)
     return numpy, compiled_ready
 
 
