@@ -105,15 +105,14 @@ def _stamp(ns: int) -> dict:
     return {"sec": ns // 1_000_000_000, "nsec": ns % 1_000_000_000}
 
 
-def _vec3(v: np.ndarray) -> dict:
-    x, y, z = (float(c) for c in v)
-    return {"x": x, "y": y, "z": z}
+def _vec3s(points: np.ndarray) -> list[dict]:
+    """Foxglove vectors of the rows of ``points`` (k, 3) (one ``tolist`` for them all)."""
+    return [{"x": x, "y": y, "z": z} for x, y, z in np.reshape(points, (-1, 3)).tolist()]
 
 
-def _quat_xyzw(q: np.ndarray) -> dict:
-    """Foxglove quaternion (scalar last) of our (w, x, y, z)."""
-    w, x, y, z = (float(c) for c in q)
-    return {"x": x, "y": y, "z": z, "w": w}
+def _quats_xyzw(q: np.ndarray) -> list[dict]:
+    """Foxglove quaternions (scalar last) of our (w, x, y, z) rows of ``q`` (k, 4)."""
+    return [{"x": x, "y": y, "z": z, "w": w} for w, x, y, z in np.reshape(q, (-1, 4)).tolist()]
 
 
 def frame_transforms(
@@ -129,23 +128,17 @@ def frame_transforms(
     q_parent_inv = quat.conj(q_parent)
     translation = quat.rotate(q_parent_inv, head - head_parent)
     rotation = quat.mul(q_parent_inv, q)
-    transforms = [_transform(stamp, WORLD_FRAME, PUPPET_FRAME, np.zeros(3), Y_UP_IN_Z_UP)]
-    for i, name in enumerate(bone_names):
-        parent_frame = bone_names[bone_parents[i]] if has_parent[i] else PUPPET_FRAME
-        transforms.append(_transform(stamp, parent_frame, name, translation[i], rotation[i]))
-    return {"transforms": transforms}
-
-
-def _transform(
-    stamp: dict, parent: str, child: str, translation: np.ndarray, q: np.ndarray
-) -> dict:
+    parents = [PUPPET_FRAME if p < 0 else bone_names[p] for p in bone_parents.tolist()]
+    frames = zip([WORLD_FRAME, *parents], [PUPPET_FRAME, *bone_names], strict=True)
+    moves = _vec3s(np.vstack((np.zeros(3), translation)))
+    turns = _quats_xyzw(np.vstack((Y_UP_IN_Z_UP, rotation)))
     return {
-        "timestamp": stamp,
-        "parent_frame_id": parent,
-        "child_frame_id": child,
-        "translation": _vec3(translation),
-        "rotation": _quat_xyzw(q),
-    }
+        "transforms": [
+            {"timestamp": stamp, "parent_frame_id": parent, "child_frame_id": child,
+             "translation": move, "rotation": turn}
+            for (parent, child), move, turn in zip(frames, moves, turns, strict=True)
+        ]
+    }  # fmt: skip
 
 
 def bones_scene(ns: int, head: np.ndarray, tail: np.ndarray) -> dict:
@@ -169,15 +162,15 @@ def line_scene(
         "pose": _IDENTITY_POSE,
         "thickness": BONE_LINE_PIXELS,
         "scale_invariant": True,
-        "points": [_vec3(p) for p in np.reshape(segments, (-1, 3))],
+        "points": _vec3s(segments),
         "color": line_color,
         "colors": [],
         "indices": [],
     }
-    size = _vec3(np.full(3, diameter))
+    size = _vec3s(np.full(3, diameter))[0]
     spheres = [
-        {"pose": {**_IDENTITY_POSE, "position": _vec3(p)}, "size": size, "color": sphere_color}
-        for p in np.reshape(centres, (-1, 3))
+        {"pose": {**_IDENTITY_POSE, "position": p}, "size": size, "color": sphere_color}
+        for p in _vec3s(centres)
     ]
     entity = {
         "timestamp": _stamp(ns),
@@ -336,10 +329,10 @@ class TraceWriter:
     def _joints_message(
         self, t: float, rotation: np.ndarray, elastic: np.ndarray, torque: np.ndarray
     ) -> dict:
-        joints = {
-            name: {"rotation": r.tolist(), "elastic": e.tolist(), "torque": f.tolist()}
-            for name, r, e, f in zip(self.joint_names, rotation, elastic, torque, strict=True)
-        }
+        rows = zip(
+            self.joint_names, rotation.tolist(), elastic.tolist(), torque.tolist(), strict=True
+        )
+        joints = {name: {"rotation": r, "elastic": e, "torque": f} for name, r, e, f in rows}
         return {"t": t, "joints": joints}
 
     def _check_open(self) -> None:
