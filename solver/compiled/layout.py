@@ -14,7 +14,7 @@ The small vectors the kernels take (options, the pointer, the coupling, flags, t
 report) are arrays with named offsets (``IntEnum``s, constants to numba):
 ``opt[Opt.h]``, ``pvec[Pointer.radius]``.
 
-``NAMES`` of a structure are the names the kernels give it; tests/test_layout.py
+``NAMES`` of a structure are the names the kernels give it; tests/solver/test_packed_layout.py
 rejects a positional index (``rw[6]``) into any of them outside this module and the
 generated views.
 """
