@@ -28,6 +28,18 @@ def quat_at(a, i):
 
 
 @kernel(error_model="numpy")
+def vec_from(a, k):
+    """a[k : k + 3] of a 1-D array as a 3-tuple."""
+    return (a[k], a[k + 1], a[k + 2])
+
+
+@kernel(error_model="numpy")
+def quat_from(a, k):
+    """a[k : k + 4] of a 1-D array as a 4-tuple."""
+    return (a[k], a[k + 1], a[k + 2], a[k + 3])
+
+
+@kernel(error_model="numpy")
 def put(out, i, v):
     """out[i, :3] = v."""
     out[i, 0] = v[0]

@@ -208,6 +208,8 @@ FIELDS = (
 )  # fmt: skip
 """State's fields after time and step, in their order: the kernel's out (x … τ), warm,
 then the kernel's sleep arrays."""
+STATE_SET_FIELDS = tuple(f for f in FIELDS if f not in ("warm_key", "warm_lam"))
+"""The State fields of a layout.StateSet's arrays, in its order."""
 
 
 def _direct(cls, names: tuple) -> tuple | None:
@@ -253,8 +255,7 @@ def _successor(state: State, time: float, steps: int, out: StateSet, keys, lam) 
         for name, default in _STATE_REST:  # fields the kernel does not produce
             values[name] = default()
         return new
-    new = (*out[: StateSet._fields.index("asleep")], keys, lam, out.asleep, out.still)
-    arrays = dict(zip(FIELDS, new, strict=True))
+    arrays = dict(zip(STATE_SET_FIELDS, out, strict=True)) | {"warm_key": keys, "warm_lam": lam}
     if type(state) is State:
         return State(time=time, step=steps, **arrays)
     return replace(state, time=time, step=steps, **arrays)

@@ -158,11 +158,11 @@ def pack(model: Model) -> FastModel:
     nrows = 9 * nj + 3 * ncontact + 6
     ns = len(model.geometry.shape_body)
     ws = Workspace(
-        rows=_rows(nrows),
+        rows=_zeros(Rows, nrows),
         resp_a=np.zeros((nrows, 6)),
         resp_b=np.zeros((nrows, 6)),
         rheo_joint=np.zeros(nrows, np.int64),
-        contacts=_contacts(ncontact),
+        contacts=_zeros(Contacts, ncontact),
         rot=np.zeros((nb, 3, 3)),
         inv_inertia=np.zeros((nb, 3, 3)),
         inertia=np.zeros((nb, 3, 3)),
@@ -171,7 +171,7 @@ def pack(model: Model) -> FastModel:
         cycles=np.zeros(len(STAGES), np.int64),
     )
     pws = ProjectionWorkspace(
-        rows=_rows(3 * nj),
+        rows=_zeros(Rows, 3 * nj),
         resp_a=np.zeros((3 * nj, 6)),
         resp_b=np.zeros((3 * nj, 6)),
         rot=np.zeros((nb, 3, 3)),
@@ -183,22 +183,9 @@ def pack(model: Model) -> FastModel:
     return FastModel(views, flat, np.zeros((nb, 3)), reason, model)
 
 
-def _rows(n: int) -> Rows:
-    """An empty row table for n rows."""
-    kinds = dict(zip(Rows._fields, Rows.KINDS, strict=True))
-    return Rows(**{name: _empty(kind, n) for name, kind in kinds.items()})
-
-
-def _contacts(n: int) -> Contacts:
-    """Empty contact buffers for n contacts."""
-    kinds = dict(zip(Contacts._fields, Contacts.KINDS, strict=True))
-    return Contacts(**{name: _empty(kind, n) for name, kind in kinds.items()})
-
-
-def _empty(kind: str, n: int) -> np.ndarray:
-    """n zero rows of a leaf kind (layout.BUFFERS)."""
-    dtype, trail = BUFFERS[kind]
-    return np.zeros((n, *trail), dtype)
+def _zeros(cls, n: int):
+    """A structure of layout (``Rows``, ``Contacts``) whose arrays all have n zero rows."""
+    return cls(*(np.zeros((n, *BUFFERS[kind][1]), BUFFERS[kind][0]) for kind in cls.KINDS))
 
 
 def _geometry(model: Model) -> tuple[Geometry, int, str | None]:

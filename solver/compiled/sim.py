@@ -31,6 +31,7 @@ from solver.compiled.fast import (
     _NO_INPUT,
     GRIP_FORCE,
     GRIP_TORQUE,
+    STATE_SET_FIELDS,
     TOUCH_FORCE,
     WRENCH,
     _input_arrays,
@@ -54,10 +55,6 @@ from solver.rows.grip import follow_steps, path_input
 from solver.solve.dispatch_kernel import OK
 from solver.state import State, StepInput, StepReport, initial_state
 
-_FIELDS = (
-    "body_pos", "body_quat", "body_vel", "body_omega", "joint_q_sf", "joint_yielded",
-    "joint_anchor", "joint_torque_avg", "joint_torque", "body_asleep", "body_still",
-)  # fmt: skip
 _BOOL = ("joint_yielded", "body_asleep")
 _KERNEL = entry_point(inplace_kernel)
 
@@ -67,7 +64,7 @@ class Sim:
 
     Its arrays are views of one set of flat buffers (solver.compiled.layout.SimArrays),
     passed to the step whole: its own copy of the packed model and its workspaces, two
-    sets of state arrays (``_FIELDS``; a step reads set ``_phase`` and writes the other,
+    sets of state arrays (``STATE_SET_FIELDS``; a step reads set ``_phase`` and writes the other,
     since it must not overwrite what it still reads and a step handed back to fast_step
     must find the old state intact), the warm keys and λ, the report."""
 
@@ -77,7 +74,10 @@ class Sim:
         self.model = model = fm.model
         self._fm = fm
         rest, nb, rows = initial_state(model), len(fm.zeros), len(fm.ws.rows.body_a)
-        sets = [StateSet(*(np.zeros_like(_field(rest, f, nb)) for f in _FIELDS)) for _ in range(2)]
+        sets = [
+            StateSet(*(np.zeros_like(_field(rest, f, nb)) for f in STATE_SET_FIELDS))
+            for _ in range(2)
+        ]
         warm = Warm(np.zeros(rows, np.int64), np.zeros(rows), np.zeros(1, np.int64))
         work = StepWork(*step_arrays(nb, len(fm.m.joint_parent), rows, len(fm.tree.parent)))
         arrays = SimArrays(fm.packed, *sets, warm, np.zeros(ReportInt.SIZE, np.int64),
@@ -90,7 +90,7 @@ class Sim:
     def load(self, state: State) -> None:
         """Make ``state`` the current state (copied)."""
         nb, nj = len(self._fm.zeros), len(self._fm.m.joint_parent)
-        current = tuple(_field(state, f, nb) for f in _FIELDS)
+        current = tuple(_field(state, f, nb) for f in STATE_SET_FIELDS)
         if [a.shape for a in current] != [a.shape for a in self._sets[0]]:  # the step trusts these
             raise ValueError(f"Sim.load: not a state of this model ({nb} bodies, {nj} joints)")
         keys, lam, count = self._warm.keys, self._warm.lam, self._warm.n
@@ -109,7 +109,7 @@ class Sim:
         """The current state, as a State of its own arrays."""
         n = int(self._warm.n[0])
         current = self._sets[self._phase]
-        arrays = {f: a.copy() for f, a in zip(_FIELDS, current, strict=True)}
+        arrays = {f: a.copy() for f, a in zip(STATE_SET_FIELDS, current, strict=True)}
         return State(
             time=self.time, step=self.steps, warm_key=self._warm.keys[:n].copy(),
             warm_lam=self._warm.lam[:n].copy(), **arrays,
@@ -119,7 +119,7 @@ class Sim:
         """The current state over this stepper's own arrays, not copied: for reading
         before the next step (which overwrites them); ``state`` is the copy to keep."""
         n = int(self._warm.n[0])
-        arrays = dict(zip(_FIELDS, self._sets[self._phase], strict=True))
+        arrays = dict(zip(STATE_SET_FIELDS, self._sets[self._phase], strict=True))
         return State(
             time=self.time, step=self.steps, warm_key=self._warm.keys[:n],
             warm_lam=self._warm.lam[:n], **arrays,

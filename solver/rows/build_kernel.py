@@ -9,6 +9,7 @@ from solver.collide.scene_kernel import collide_scene
 from solver.compiled.clock import cycles, tick
 from solver.compiled.layout import Coupling, Flags, IOpt, Opt, Pointer
 from solver.jit import kernel
+from solver.kin_kernel import quat_from, scale, sub, vec_from
 from solver.rows.contacts_kernel import contact_rows
 from solver.rows.grip_kernel import MODE_GRIP, MODE_TOUCH, coupling_rows
 from solver.rows.joints_kernel import anchor_rows, limit_rows, rheology_rows
@@ -76,45 +77,22 @@ def build_rows(joints, rheo, limits, g, opt, iopt, st, rot, vel_free, inp, ws, a
             n,
         )
     if ivec[Flags.mode] == MODE_GRIP:
-        ptr = (
-            (pvec[Pointer.pos], pvec[Pointer.pos + 1], pvec[Pointer.pos + 2]),
-            (
-                pvec[Pointer.quat],
-                pvec[Pointer.quat + 1],
-                pvec[Pointer.quat + 2],
-                pvec[Pointer.quat + 3],
-            ),
-            (pvec[Pointer.vel], pvec[Pointer.vel + 1], pvec[Pointer.vel + 2]),
-            (pvec[Pointer.omega], pvec[Pointer.omega + 1], pvec[Pointer.omega + 2]),
-        )
+        ptr = (vec_from(pvec, Pointer.pos), quat_from(pvec, Pointer.quat),
+               vec_from(pvec, Pointer.vel), vec_from(pvec, Pointer.omega))  # fmt: skip
         cpl = (
-            (cvec[Coupling.anchor], cvec[Coupling.anchor + 1], cvec[Coupling.anchor + 2]),
-            (cvec[Coupling.offset], cvec[Coupling.offset + 1], cvec[Coupling.offset + 2]),
-            (
-                cvec[Coupling.rest],
-                cvec[Coupling.rest + 1],
-                cvec[Coupling.rest + 2],
-                cvec[Coupling.rest + 3],
-            ),
-            cvec[Coupling.stiffness],
-            cvec[Coupling.damping],
-            cvec[Coupling.rot_stiffness],
-            cvec[Coupling.rot_damping],
-            cvec[Coupling.force_limit],
-            cvec[Coupling.torque_limit],
-        )
+            vec_from(cvec, Coupling.anchor), vec_from(cvec, Coupling.offset),
+            quat_from(cvec, Coupling.rest), cvec[Coupling.stiffness], cvec[Coupling.damping],
+            cvec[Coupling.rot_stiffness], cvec[Coupling.rot_damping],
+            cvec[Coupling.force_limit], cvec[Coupling.torque_limit],
+        )  # fmt: skip
         grip0 = n
         n = coupling_rows(
             pos, quat, h, ptr, cpl, ivec[Flags.body], ivec[Flags.position_only], rw, n
         )
         return n, ncontact, grip0, n - grip0
     if ivec[Flags.mode] == MODE_TOUCH:
-        u = (pvec[Pointer.vel], pvec[Pointer.vel + 1], pvec[Pointer.vel + 2])
-        pc = (
-            pvec[Pointer.pos] - h * u[0],
-            pvec[Pointer.pos + 1] - h * u[1],
-            pvec[Pointer.pos + 2] - h * u[2],
-        )
+        u = vec_from(pvec, Pointer.vel)
+        pc = sub(vec_from(pvec, Pointer.pos), scale(h, u))  # where the pointer was
         end = collide_pointer(
             g, centre, srot, pc, pvec[Pointer.radius], opt[Opt.contact_margin], cb, ncontact
         )
