@@ -1,5 +1,5 @@
 """``python -m puppetcli``: the same as the ``puppetcli`` command."""
 
-from puppetcli.cli import cli
+from puppetcli.daemon.client import main
 
-cli(prog_name="puppetcli")
+main()

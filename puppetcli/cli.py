@@ -23,6 +23,7 @@ COMMANDS = {
     "convert": "puppetcli.commands.convert",
     "record": "puppetcli.commands.record",
     "live": "puppetcli.commands.live",
+    "daemon": "puppetcli.commands.daemon",
 }
 HELP = {
     "validate": "Check a rig file and summarise what its simulation needs.",
@@ -34,6 +35,7 @@ HELP = {
     "convert": "Run a manipulation script and write the motion as BVH.",
     "record": "Turn a script into the session a SPIDAR-G device would record (.mcap).",
     "live": "Pose the doll by hand in the browser, recorded as a session (.mcap).",
+    "daemon": "Show or stop the warm processes that make later commands start fast.",
 }
 
 

@@ -16,9 +16,21 @@ def bone_points(
 
     bones (k,): the bone of each point; None = one point per bone, in order.
     """
+    return points_on_bones(model, state.body_pos, state.body_quat, rest_points, bones)
+
+
+def points_on_bones(
+    model: Model,
+    body_pos: np.ndarray,
+    body_quat: np.ndarray,
+    rest_points: np.ndarray,
+    bones: np.ndarray | None = None,
+) -> np.ndarray:
+    """``bone_points`` of body poses (..., nbody, 3) and (..., nbody, 4): any number of
+    leading axes (a run's steps, say)."""
     b = np.arange(len(model.bone_names)) if bones is None else bones
     local = rest_points - model.body_pos0[b]
-    return state.body_pos[b] + quat.rotate(state.body_quat[b], local)
+    return body_pos[..., b, :] + quat.rotate(body_quat[..., b, :], local)
 
 
 def bone_heads(model: Model, state: State) -> np.ndarray:
@@ -32,9 +44,10 @@ def bone_tails(model: Model, state: State) -> np.ndarray:
 
 
 def relative_rotations(model: Model, body_quat: np.ndarray) -> np.ndarray:
-    """q_rel = q_parent⁻¹ ⊗ q_child per joint, (nj,4)."""
-    qs = np.vstack((body_quat, quat.IDENTITY))
-    return quat.mul(quat.conj(qs[model.joint_parent]), qs[model.joint_bone])
+    """q_rel = q_parent⁻¹ ⊗ q_child per joint, (..., nj, 4), of rotations (..., nbody, 4)."""
+    world = np.broadcast_to(quat.IDENTITY, (*body_quat.shape[:-2], 1, 4))
+    qs = np.concatenate((body_quat, world), axis=-2)
+    return quat.mul(quat.conj(qs[..., model.joint_parent, :]), qs[..., model.joint_bone, :])
 
 
 def joint_rotations(model: Model, state: State) -> np.ndarray:

@@ -6,6 +6,8 @@ import os
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 os.environ.setdefault("PUPPETCLI_ENGINE", "compiled")  # no background build: tests wait for it
+# Every test runs its commands in its own process (tests/puppetcli/daemon starts its own).
+os.environ["PUPPETCLI_DAEMON"] = "off"
 
 
 def pytest_runtest_setup(item):

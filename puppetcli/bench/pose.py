@@ -20,6 +20,7 @@ from puppetcli.bench.scenes import ROOT
 from puppetcli.rig.load import load_rig
 from puppetcli.run.runner import Runner, script_model
 from puppetcli.run.trace import RunTrace
+from puppetcli.run.warmup import freeze_loaded
 from puppetcli.script.load import Script, load_script
 from solver.engine import Engine
 from solver.model import Model, build_model
@@ -74,7 +75,7 @@ def _scripted(model: Model, plan: Script, trace_dir: Path | None) -> float:
         return runner.run().wall_time
 
 
-def measure_pose(steps_h: list[float | None], repeats: int = 5) -> list[PoseRow]:
+def measure_pose(steps_h: list[float | None], repeats: int = 15) -> list[PoseRow]:
     """Rows for the example pose at each step h (None: the script's own)."""
     spec = load_rig(RIG)
     rows = []
@@ -87,6 +88,7 @@ def measure_pose(steps_h: list[float | None], repeats: int = 5) -> list[PoseRow]
 
 def _measure(model: Model, plan: Script, repeats: int) -> list[PoseRow]:
     inputs = recorded_inputs(model, plan)
+    freeze_loaded()  # as ``pose`` does once its solver is loaded
     with tempfile.TemporaryDirectory() as tmp:
         runs = {
             "bare stepper": lambda: _bare(model, inputs),

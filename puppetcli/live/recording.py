@@ -31,9 +31,9 @@ import numpy as np
 from puppetcli.live.track import LiveTrack, PointerFilter, device_from_world
 from puppetcli.mcap.replay import EventActions, Replay, SessionRunner, session_script
 from puppetcli.mcap.session import TICK, Event, Session, SessionWriter, Workspace
+from puppetcli.run.build import compile_engine
 from puppetcli.run.runner import script_model
 from puppetcli.run.trace import tensions_message, wrench_message
-from puppetcli.run.warmup import compile_engine
 from puppetcli.script.actions import GRIP_DEFAULTS
 from puppetcli.script.load import DEFAULT_LOWPASS, DEFAULT_MAX_FORCE, DEFAULT_MAX_TORQUE
 from puppetcli.spidar import DevicePreset, TensionDistributor

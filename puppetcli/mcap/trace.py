@@ -25,7 +25,7 @@ import json
 import math
 import os
 import struct
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -37,6 +37,7 @@ from zstandard import ZstdError
 
 from puppetcli.errors import PuppetError
 from puppetcli.jsontext import json_bytes
+from puppetcli.mcap.template import MessageTemplate, Slot, slots
 from puppetcli.outputs import atomic_path
 from solver import quat
 
@@ -51,6 +52,8 @@ __all__ = [
     "load_schema",
     "ns_from_seconds",
     "read_trace",
+    "relative_frames",
+    "scene_update",
 ]
 
 WORLD_FRAME = "world"
@@ -119,32 +122,56 @@ def frame_transforms(
     ns: int, bone_names: Sequence[str], bone_parents: np.ndarray, head: np.ndarray, rot: np.ndarray
 ) -> dict:
     """``foxglove.FrameTransforms``: world → puppet, then each bone in its parent's frame."""
-    stamp = _stamp(ns)
+    move, turn = relative_frames(bone_parents, head, rot)
+    return _transforms_message(_stamp(ns), bone_names, bone_parents, move, turn)
+
+
+def relative_frames(
+    bone_parents: np.ndarray, head: np.ndarray, rot: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """(translations (..., nb+1, 3), rotations (..., nb+1, 4)) of world → puppet, then of
+    each bone in its parent's frame (module docstring), for heads (..., nb, 3) and
+    rotations (..., nb, 4) of any number of leading axes."""
     q = quat.normalize(rot)
-    has_parent = bone_parents >= 0
-    parent = np.where(has_parent, bone_parents, 0)
-    q_parent = np.where(has_parent[:, None], q[parent], quat.IDENTITY)
-    head_parent = np.where(has_parent[:, None], head[parent], 0.0)
+    has_parent = (bone_parents >= 0)[:, None]
+    parent = np.where(has_parent[:, 0], bone_parents, 0)
+    q_parent = np.where(has_parent, q[..., parent, :], quat.IDENTITY)
+    head_parent = np.where(has_parent, head[..., parent, :], 0.0)
     q_parent_inv = quat.conj(q_parent)
     translation = quat.rotate(q_parent_inv, head - head_parent)
     rotation = quat.mul(q_parent_inv, q)
+    lead = head.shape[:-2]
+    return (
+        np.concatenate((np.zeros((*lead, 1, 3)), translation), axis=-2),
+        np.concatenate((np.broadcast_to(Y_UP_IN_Z_UP, (*lead, 1, 4)), rotation), axis=-2),
+    )
+
+
+def _transforms_message(
+    stamp: dict, bone_names: Sequence[str], bone_parents: np.ndarray, move, turn
+) -> dict:
+    """``foxglove.FrameTransforms`` of ``relative_frames``' translations and rotations."""
     parents = [PUPPET_FRAME if p < 0 else bone_names[p] for p in bone_parents.tolist()]
     frames = zip([WORLD_FRAME, *parents], [PUPPET_FRAME, *bone_names], strict=True)
-    moves = _vec3s(np.vstack((np.zeros(3), translation)))
-    turns = _quats_xyzw(np.vstack((Y_UP_IN_Z_UP, rotation)))
     return {
         "transforms": [
             {"timestamp": stamp, "parent_frame_id": parent, "child_frame_id": child,
              "translation": move, "rotation": turn}
-            for (parent, child), move, turn in zip(frames, moves, turns, strict=True)
+            for (parent, child), move, turn in zip(frames, _vec3s(move), _quats_xyzw(turn),
+                                                   strict=True)
         ]
     }  # fmt: skip
 
 
 def bones_scene(ns: int, head: np.ndarray, tail: np.ndarray) -> dict:
     """``foxglove.SceneUpdate``: in ``puppet``, a LINE_LIST head→tail per bone and head balls."""
+    return _bones_message(_stamp(ns), head, tail)
+
+
+def _bones_message(stamp: dict, head: np.ndarray, tail: np.ndarray) -> dict:
     segments = np.stack((head, tail), axis=1)
-    return line_scene(ns, "bones", segments, head, BONE_COLOR, JOINT_COLOR, JOINT_SPHERE_DIAMETER)
+    diameter = JOINT_SPHERE_DIAMETER
+    return scene_update(stamp, "bones", segments, head, BONE_COLOR, JOINT_COLOR, diameter)
 
 
 def line_scene(
@@ -157,6 +184,20 @@ def line_scene(
     diameter: float,
 ) -> dict:
     """``foxglove.SceneUpdate``: one entity in ``puppet``, segments (k,2,3) and balls (m,3)."""
+    stamp = _stamp(ns)
+    return scene_update(stamp, entity_id, segments, centres, line_color, sphere_color, diameter)
+
+
+def scene_update(
+    stamp: dict,
+    entity_id: str,
+    segments: np.ndarray,
+    centres: np.ndarray,
+    line_color: dict,
+    sphere_color: dict,
+    diameter: float,
+) -> dict:
+    """``line_scene`` at the Foxglove time ``stamp`` ({"sec", "nsec"})."""
     line = {
         "type": 2,  # LINE_LIST: points pair up as (start, end)
         "pose": _IDENTITY_POSE,
@@ -173,7 +214,7 @@ def line_scene(
         for p in _vec3s(centres)
     ]
     entity = {
-        "timestamp": _stamp(ns),
+        "timestamp": stamp,
         "frame_id": PUPPET_FRAME,
         "id": entity_id,
         "lifetime": {
@@ -211,10 +252,11 @@ def _check_skeleton(bone_names: Sequence[str], bone_parents: Sequence[int]) -> n
     return parents
 
 
-def _rows(name: str, array: np.ndarray, n: int, width: int) -> np.ndarray:
+def _rows(name: str, array: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    """``array`` as floats, checked to have ``shape`` (the first axis: the steps)."""
     a = np.asarray(array, dtype=float)
-    if a.shape != (n, width):
-        raise ValueError(f"{name} has shape {a.shape}, expected ({n}, {width})")
+    if a.shape != shape:
+        raise ValueError(f"{name} has shape {a.shape[1:]}, expected {shape[1:]}")
     return a
 
 
@@ -255,6 +297,7 @@ class TraceWriter:
         except BaseException as exc:
             self._discard(exc)
             raise
+        self._templates = self._step_templates()
 
     def __enter__(self) -> TraceWriter:
         return self
@@ -279,11 +322,14 @@ class TraceWriter:
 
     def write(self, topic: str, t: float, message: dict) -> None:
         """Write ``message`` on ``topic`` at simulated time ``t`` (s); numpy values are allowed."""
+        self.write_encoded(topic, t, json_bytes(message))
+
+    def write_encoded(self, topic: str, t: float, data: bytes) -> None:
+        """Write the JSON message ``data`` (UTF-8) on ``topic`` at simulated time ``t`` (s)."""
         self._check_open()
         if topic not in self._channels:
             raise ValueError(f"unknown trace channel {topic}; known: {', '.join(self._channels)}")
-        ns = self._check_time(t)
-        self._add(topic, ns, json_bytes(message))
+        self._add(topic, self._check_time(t), data)
 
     def write_step(
         self,
@@ -304,31 +350,77 @@ class TraceWriter:
         (nbone, 3) world positions (m); bone_quat (nbone, 4) world rotations (w, x, y, z).
         stats: rows, contacts, iterations, residual, solver (see puppetcli.SolverStats).
         """
+        arrays = (joint_rotation, joint_elastic, joint_torque, bone_head, bone_tail, bone_quat)
+        self.write_steps([t], *(np.asarray(a, dtype=float)[None] for a in arrays), [stats])
+
+    def write_steps(
+        self,
+        times: list[float],
+        joint_rotation: np.ndarray,
+        joint_elastic: np.ndarray,
+        joint_torque: np.ndarray,
+        bone_head: np.ndarray,
+        bone_tail: np.ndarray,
+        bone_quat: np.ndarray,
+        stats: list[dict],
+        then: Callable[[int], None] | None = None,
+    ) -> None:
+        """``write_step`` for k steps at once (the arrays with a first axis of k): the
+        frames are computed together; a step that fails writes nothing of itself and
+        leaves the steps before it written.  ``then(i)``, when given, runs after step i is
+        written (to write the caller's messages of that step, in time order)."""
         self._check_open()
+        k, nb, nj = len(times), len(self.bone_names), len(self.joint_names)
+        head = _rows("bone_head", bone_head, (k, nb, 3))
+        tail = _rows("bone_tail", bone_tail, (k, nb, 3))
+        rot = _rows("bone_quat", bone_quat, (k, nb, 4))
+        joints = np.concatenate(
+            [_rows(name, a, (k, nj, 3)) for name, a in
+             (("joint_rotation", joint_rotation), ("joint_elastic", joint_elastic),
+              ("joint_torque", joint_torque))], axis=2,
+        ).reshape(k, -1).tolist()  # fmt: skip
+        move, turn = relative_frames(self.bone_parents, head, rot)
+        move, turn = move.reshape(k, -1).tolist(), turn.reshape(k, -1).tolist()
+        head, tail = head.reshape(k, -1).tolist(), tail.reshape(k, -1).tolist()
+        tf, bones, joint = self._templates
+        for i, t in enumerate(times):
+            ns = self._check_time(t)
+            stamp = divmod(ns, 1_000_000_000)
+            encoded = {
+                "/tf": tf.fill([*stamp, *move[i], *turn[i]]),
+                "/puppet/bones": bones.fill([*stamp, *head[i], *tail[i]]),
+                "/puppet/joints": joint.fill([t, *joints[i]]),
+                "/solver/stats": json_bytes(_stats_message(t, stats[i])),
+            }
+            for topic, data in encoded.items():
+                self._add(topic, ns, data)
+            if then is not None:
+                then(i)
+
+    def _step_templates(self) -> tuple[MessageTemplate, MessageTemplate, MessageTemplate]:
+        """Templates (puppetcli.mcap.template) of ``/tf``, ``/puppet/bones`` and
+        ``/puppet/joints``, the numbers in the order ``write_step`` fills them."""
         nb, nj = len(self.bone_names), len(self.joint_names)
-        head = _rows("bone_head", bone_head, nb, 3)
-        tail = _rows("bone_tail", bone_tail, nb, 3)
-        rot = _rows("bone_quat", bone_quat, nb, 4)
-        rotation = _rows("joint_rotation", joint_rotation, nj, 3)
-        elastic = _rows("joint_elastic", joint_elastic, nj, 3)
-        torque = _rows("joint_torque", joint_torque, nj, 3)
-        ns = self._check_time(t)
-        encoded = {
-            "/tf": json_bytes(frame_transforms(ns, self.bone_names, self.bone_parents, head, rot)),
-            "/puppet/bones": json_bytes(bones_scene(ns, head, tail)),
-            "/puppet/joints": json_bytes(self._joints_message(t, rotation, elastic, torque)),
-            "/solver/stats": json_bytes(_stats_message(t, stats)),
-        }
-        for topic, data in encoded.items():
-            self._add(topic, ns, data)
+        stamp = {"sec": Slot("sec"), "nsec": Slot("nsec")}
+        clock = [("sec", 1), ("nsec", 1)]
+        move, turn = slots("move", (nb + 1, 3)), slots("turn", (nb + 1, 4))
+        tf = _transforms_message(stamp, self.bone_names, self.bone_parents, move, turn)
+        head, tail = slots("head", (nb, 3)), slots("tail", (nb, 3))
+        bones = _bones_message(stamp, head, tail)
+        joint = slots("joint", (nj, 3, 3))
+        joints = self._joints_message(Slot("t"), joint[:, 0], joint[:, 1], joint[:, 2])
+        return (
+            MessageTemplate(tf, [*clock, ("move", move.size), ("turn", turn.size)]),
+            MessageTemplate(bones, [*clock, ("head", head.size), ("tail", tail.size)]),
+            MessageTemplate(joints, [("t", 1), ("joint", joint.size)]),
+        )
 
     def close(self) -> None:
         """Finish the MCAP (summary, indexes, footer) and publish the file; idempotent."""
         self._close(None)
 
-    def _joints_message(
-        self, t: float, rotation: np.ndarray, elastic: np.ndarray, torque: np.ndarray
-    ) -> dict:
+    def _joints_message(self, t, rotation, elastic, torque) -> dict:
+        """``/puppet/joints`` at ``t``: (nj, 3) rotations, elastic parts and torques."""
         rows = zip(
             self.joint_names, rotation.tolist(), elastic.tolist(), torque.tolist(), strict=True
         )

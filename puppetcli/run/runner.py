@@ -42,11 +42,11 @@ from solver.observe import bone_points
 from solver.rows.grip import (
     Coupling,
     Pointer,
+    any_within,
     bone_reach,
     make_coupling,
     nearest_point,
     path_input,
-    segment_distances,
 )
 from solver.state import State, StepInput, initial_state
 
@@ -151,6 +151,8 @@ class Runner:
                 self.advance(self.script.duration - self.sim.time)
         except SimulationError as exc:
             error = exc
+        if self.trace is not None:
+            self.trace.flush()  # the trace's last steps are part of the run's time
         return RunResult(
             self.keys, self.sim.state, self.sim.steps, time.perf_counter() - start,
             self.expectations, self.peak, self.peak_displayed, error,
@@ -277,9 +279,8 @@ class Runner:
         if not self.touch_enabled:
             return False
         if self.touch_suspended:
-            dist, _ = segment_distances(self.model, self.sim.view(), pos)
             gap = self.reach + self.script.pointer_radius + self.model.options.contact_margin
-            self.touch_suspended = bool(np.any(dist <= gap))
+            self.touch_suspended = any_within(self.model, self.sim.view(), pos, gap)
         return not self.touch_suspended
 
     def advance(self, duration: float, push: Push | None = None) -> None:

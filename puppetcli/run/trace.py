@@ -12,16 +12,18 @@ use the pointer.  Session replays (``spidar=True``) add `/spidar/tensions`
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from puppetcli.mcap.trace import TraceWriter, line_scene, load_schema
+from puppetcli.mcap.template import MessageTemplate, Slot, slots
+from puppetcli.mcap.trace import TraceWriter, load_schema, scene_update
 from puppetcli.script.load import Script
 from puppetcli.spidar.pointer import device_from_world
 from solver import quat
 from solver.model import Model
-from solver.observe import bone_heads, bone_tails, joint_rotations
+from solver.observe import points_on_bones, relative_rotations
 from solver.rows.grip import Coupling
 from solver.state import State, StepInput, StepReport
 
@@ -63,8 +65,28 @@ def tensions_message(t: float, shown, wanted: tuple) -> dict:
     }  # fmt: skip
 
 
+BATCH = 64  # steps whose frames are computed together: numpy's cost per call, amortised
+
+
+@dataclass
+class _Step:
+    """What a trace keeps of a step until it writes it (``RunTrace.flush``)."""
+
+    t: float
+    body_pos: np.ndarray
+    body_quat: np.ndarray
+    elastic: np.ndarray
+    torque: np.ndarray
+    stats: dict
+    device: tuple | None  # (pointer position, orientation, coupling, requested, displayed)
+
+
 class RunTrace:
-    """Writes every ``every``-th step (and every key) of a run."""
+    """Writes every ``every``-th step (and every key) of a run.
+
+    Steps are kept and written ``BATCH`` at a time (their frames computed together), in
+    the order they came with the other messages; everything is written by ``flush``,
+    which closing the trace calls, also when the run fails."""
 
     def __init__(
         self, path: Path, model: Model, script: Script, every: int, pointer: bool,
@@ -80,64 +102,163 @@ class RunTrace:
         channels = (CHANNELS if pointer else {}) | (SPIDAR_CHANNELS if spidar else {})
         for topic, name in channels.items():
             self.writer.add_channel(topic, name, load_schema(name))
+        self._pending: list[_Step | tuple[str, float, dict]] = []
+        self._steps = 0
+        self._device = DeviceMessages(model.bone_names, script)
 
     def __enter__(self) -> RunTrace:
         self.writer.__enter__()
         return self
 
     def __exit__(self, *exc) -> None:
-        self.writer.__exit__(*exc)
+        try:
+            self.flush()
+        finally:
+            self.writer.__exit__(*exc)
 
     def keyframe(self, t: float, label: str, line: int, index: int, undo: bool = False) -> None:
         """A key taken (``index`` from 1), or with ``undo`` the key ``index`` dropped."""
         event = {"t": t, "label": label, "line": line, "index": index}
-        self.writer.write("/puppet/keyframe", t, event | ({"undo": True} if undo else {}))
+        self._pending.append(("/puppet/keyframe", t, event | ({"undo": True} if undo else {})))
 
     def step(self, s: State, report: StepReport, inp: StepInput, coupling: Coupling | None,
              requested: tuple, displayed: tuple) -> None:  # fmt: skip
         if s.step % self.every:
             return
-        m = self.model
-        self.writer.write_step(
-            s.time, joint_rotation=joint_rotations(m, s), joint_elastic=s.joint_q_sf,
-            joint_torque=s.joint_torque, bone_head=bone_heads(m, s), bone_tail=bone_tails(m, s),
-            bone_quat=s.body_quat[: len(m.bone_names)],
-            stats=dict(rows=report.rows, contacts=report.contacts, iterations=report.iterations,
-                       residual=report.residual, solver=report.solver),
-        )  # fmt: skip
+        device = None
         if self.pointer and inp.pointer is not None:
-            self._device(s, inp.pointer, coupling, requested, displayed)
+            ptr = inp.pointer
+            device = (ptr.pos.copy(), ptr.quat.copy(), coupling, requested, displayed)
+        self._pending.append(_Step(
+            s.time, s.body_pos.copy(), s.body_quat.copy(), s.joint_q_sf.copy(),
+            s.joint_torque.copy(),
+            dict(rows=report.rows, contacts=report.contacts, iterations=report.iterations,
+                 residual=report.residual, solver=report.solver),
+            device,
+        ))  # fmt: skip
+        self._steps += 1
+        if self._steps >= BATCH:
+            self.flush()
 
     def spidar(self, s: State, track, k: int, shown, wanted: tuple) -> None:
         """The device's side of a replayed step: estimate at tick k, tensions, Aᵀt."""
         if s.step % self.every:
             return
-        self.writer.write("/spidar/estimate", s.time, {
+        self._pending.append(("/spidar/estimate", s.time, {
             "t": s.time,
             "device": {"position": track.device_pos[k], "orientation": track.device_quat[k]},
             "world": {"position": track.world_pos[k], "orientation": track.world_quat[k]},
-        })  # fmt: skip
-        self.writer.write("/spidar/tensions", s.time, tensions_message(s.time, shown, wanted))
+        }))  # fmt: skip
+        message = tensions_message(s.time, shown, wanted)
+        self._pending.append(("/spidar/tensions", s.time, message))
 
-    def _device(
-        self, s: State, ptr, coupling: Coupling | None, requested: tuple, displayed: tuple
-    ) -> None:
+    def flush(self) -> None:
+        """Write everything kept, in order."""
+        pending, self._pending, self._steps = self._pending, [], 0
+        lead, steps, after = [], [], []  # messages before the first step; steps; after each
+        for item in pending:
+            if isinstance(item, _Step):
+                steps.append(item)
+                after.append([])
+            else:
+                (after[-1] if after else lead).append(item)
+        for item in lead:
+            self.writer.write(*item)
+        if not steps:
+            return
+        m, nb = self.model, len(self.model.bone_names)
+        pos = np.stack([step.body_pos for step in steps])
+        quats = np.stack([step.body_quat for step in steps])
+
+        def then(i: int) -> None:
+            if steps[i].device is not None:
+                self._device.write(self.writer, steps[i].t, pos[i], quats[i], steps[i].device)
+            for item in after[i]:
+                self.writer.write(*item)
+
+        self.writer.write_steps(
+            [step.t for step in steps],
+            quat.log(relative_rotations(m, quats)),
+            np.stack([step.elastic for step in steps]),
+            np.stack([step.torque for step in steps]),
+            points_on_bones(m, pos, quats, m.bone_head0),
+            points_on_bones(m, pos, quats, m.bone_tail0),
+            quats[:, :nb],
+            [step.stats for step in steps],
+            then,
+        )
+
+
+def device_pose_message(t, position, orientation, device_position, bone: str | None) -> dict:
+    """``/device/pose``: the pointer in the world and the device, and the grip mode."""
+    return {
+        "t": t, "position": position, "orientation": orientation,
+        "device_position": device_position,
+        "mode": "free" if bone is None else "grip", "bone": bone,
+    }  # fmt: skip
+
+
+class DeviceMessages:
+    """``/device/pose``, ``/haptic/wrench`` and ``/puppet/pointer`` of a step, written with
+    message templates (puppetcli.mcap.template), made for each grip mode when first met."""
+
+    def __init__(self, bone_names: list[str], script: Script) -> None:
+        self.bone_names, self.script = bone_names, script
+        self._poses: dict[str | None, MessageTemplate] = {}
+        self._pointers: dict[int, MessageTemplate] = {}
+        pair = (slots("force", (3,)), slots("torque", (3,)))
+        pair_shown = (slots("force_shown", (3,)), slots("torque_shown", (3,)))
+        self._wrench = MessageTemplate(
+            wrench_message(Slot("t"), pair, pair_shown),
+            [("t", 1), ("force", 3), ("torque", 3), ("force_shown", 3), ("torque_shown", 3)],
+        )
+
+    def write(self, writer: TraceWriter, t: float, body_pos, body_quat, device) -> None:
+        """The three messages at ``t``; ``device``: as ``_Step.device``."""
+        ptr_pos, ptr_quat, coupling, requested, displayed = device
         sc = self.script
-        bone = None if coupling is None else self.model.bone_names[coupling.body]
-        self.writer.write("/device/pose", s.time, {
-            "t": s.time, "position": ptr.pos, "orientation": ptr.quat,
-            "device_position": device_from_world(ptr.pos, sc.workspace_offset, sc.workspace_scale),
-            "mode": "free" if coupling is None else "grip", "bone": bone,
-        })  # fmt: skip
-        self.writer.write("/haptic/wrench", s.time, wrench_message(s.time, requested, displayed))
-        segments = np.zeros((0, 2, 3))
+        bone = None if coupling is None else self.bone_names[coupling.body]
+        where = device_from_world(ptr_pos, sc.workspace_offset, sc.workspace_scale)
+        position = ptr_pos.tolist()
+        writer.write_encoded("/device/pose", t, self._pose(bone).fill(
+            [t, *position, *ptr_quat.tolist(), *where.tolist()]))  # fmt: skip
+        writer.write_encoded("/haptic/wrench", t, self._wrench.fill(
+            [t, *requested[0], *requested[1], *displayed[0], *displayed[1]]))  # fmt: skip
+        segment = []
         if coupling is not None:
             b = coupling.body
-            grip = s.body_pos[b] + quat.rotate(s.body_quat[b], coupling.anchor)
-            segments = np.array([[ptr.pos, grip]])
-        scene = line_scene(_ns(s.time), "pointer", segments, ptr.pos[None], COUPLING_COLOR,
-                           POINTER_COLOR, max(2.0 * sc.pointer_radius, 0.01))  # fmt: skip
-        self.writer.write("/puppet/pointer", s.time, scene)
+            grip = body_pos[b] + quat.rotate(body_quat[b], coupling.anchor)
+            segment = [*position, *grip.tolist()]
+        stamp = divmod(_ns(t), 1_000_000_000)
+        fill = [*stamp, *position, *segment]
+        writer.write_encoded("/puppet/pointer", t, self._pointer(len(segment) // 6).fill(fill))
+
+    def _pose(self, bone: str | None) -> MessageTemplate:
+        """The ``/device/pose`` template with ``bone`` gripped (None: free mode)."""
+        if bone not in self._poses:
+            shape = device_pose_message(Slot("t"), slots("position", (3,)).tolist(),
+                                        slots("orientation", (4,)).tolist(),
+                                        slots("device", (3,)).tolist(), bone)  # fmt: skip
+            groups = [("t", 1), ("position", 3), ("orientation", 4), ("device", 3)]
+            self._poses[bone] = MessageTemplate(shape, groups)
+        return self._poses[bone]
+
+    def _pointer(self, segments: int) -> MessageTemplate:
+        """The ``/puppet/pointer`` template with ``segments`` coupling lines (0 or 1)."""
+        if segments not in self._pointers:
+            stamp = {"sec": Slot("sec"), "nsec": Slot("nsec")}
+            shape = pointer_scene(stamp, slots("segment", (segments, 2, 3)),
+                                  slots("centre", (1, 3)), self.script)  # fmt: skip
+            groups = [("sec", 1), ("nsec", 1), ("centre", 3), ("segment", 6 * segments)]
+            self._pointers[segments] = MessageTemplate(shape, groups)
+        return self._pointers[segments]
+
+
+def pointer_scene(stamp: dict, segments, centres, script: Script) -> dict:
+    """``/puppet/pointer``: the pointer's ball and, in grip mode, the coupling line."""
+    diameter = max(2.0 * script.pointer_radius, 0.01)
+    return scene_update(stamp, "pointer", segments, centres, COUPLING_COLOR, POINTER_COLOR,
+                        diameter)  # fmt: skip
 
 
 def _ns(t: float) -> int:

@@ -13,13 +13,16 @@ option of puppetcli.commands.options, or ``PUPPETCLI_ENGINE``):
   simulation (steps/s, a progress bar's estimate).
 - ``numpy``: the numpy step throughout.
 
-A finished build leaves a marker beside numba's cache of the step, named with the stamp of
-the solver's sources (``solver.jit.fingerprint``): an edit of the solver makes it stale.
+A run on the compiled step leaves a warm daemon behind for the next commands
+(puppetcli.daemon).
+
+Whether the compiled step is built: puppetcli.run.build.
 """
 
 from __future__ import annotations
 
 import contextlib
+import gc
 import os
 import subprocess
 import sys
@@ -30,9 +33,12 @@ from pathlib import Path
 
 import click
 
+from puppetcli.daemon.serve import start as start_daemon
+from puppetcli.run.build import compile_engine, compiled_ready, marker
+
 __all__ = [
-    "ENGINES", "NOTICE_AFTER", "compile_engine", "compiled_ready",
-    "first_step", "prepare_engine", "start_build", "warm_up", "warm_up_step",
+    "ENGINES", "NOTICE_AFTER", "first_step", "freeze_loaded", "prepare_engine", "start_build",
+    "warm_up", "warm_up_step",
 ]  # fmt: skip
 
 ENGINES = ("auto", "compiled", "numpy")
@@ -68,26 +74,6 @@ def warm_up(
         click.echo(f"{ready} ({took:.0f} s)", err=True)
 
 
-def compile_engine(model) -> None:
-    """One throwaway step of ``model`` from rest on each of its compiled engine's paths, in
-    place (a run's steps), along a path (a batch of them) and to a new State (a step the
-    stepper hands back): numba compiles or loads them now rather than in the middle of a
-    run.  Marks the build done (``compiled_ready``)."""
-    import numpy as np
-
-    from solver.engine import Engine
-    from solver.state import initial_state
-
-    engine = Engine(model.with_options(engine="compiled"))
-    stepper = engine.stepper()
-    stepper.advance()
-    path = (np.zeros((1, 3)), np.tile([1.0, 0.0, 0.0, 0.0], (1, 1)), np.zeros((1, 3)))
-    stepper.follow((*path, np.zeros((1, 3))), 0.0, None, np.empty((1, 9)))
-    engine.step(initial_state(model))
-    with contextlib.suppress(OSError):  # no place for it: later runs build again, harmlessly
-        _marker().touch()
-
-
 def first_step(model) -> None:
     """One throwaway in-place step of ``model`` on its engine: loads (or, for the numpy
     step's shared kernels, compiles) what a run's steps need now, not in the first timed
@@ -97,14 +83,17 @@ def first_step(model) -> None:
     Engine(model).stepper().advance()
 
 
+def freeze_loaded() -> None:
+    """Move everything loaded so far (modules, the solver's compiled code, the model) out of
+    the garbage collector's way: a run's collections then walk only what the run made
+    (a full collection over numba's objects costs milliseconds, as much as the steps)."""
+    gc.collect()
+    gc.freeze()
+
+
 def warm_up_step(model) -> None:
     """``warm_up`` of ``compile_engine(model)``."""
     warm_up(lambda: compile_engine(model))
-
-
-def compiled_ready() -> bool:
-    """The compiled step of the current solver sources is built (module docstring)."""
-    return _marker().exists()
 
 
 def prepare_engine(model, engine: str, rig: Path) -> tuple:
@@ -114,23 +103,27 @@ def prepare_engine(model, engine: str, rig: Path) -> tuple:
     numpy, compiled = model.with_options(engine="numpy"), model.with_options(engine="compiled")
     if engine == "numpy":
         warm_up(lambda: first_step(numpy), COMPILING_NUMPY, NUMPY_READY)
-        return numpy, None
-    if compiled_ready():
+        chosen, upgrade = numpy, None
+    elif compiled_ready():
         warm_up(lambda: first_step(compiled))
-        return compiled, None
-    if engine == "compiled":
+        start_daemon(rig)
+        chosen, upgrade = compiled, None
+    elif engine == "compiled":
         warm_up_step(model)
-        return compiled, None
-    start_build(rig)
-    click.echo(BUILDING, err=True)
-    warm_up(lambda: first_step(numpy), COMPILING_NUMPY, NUMPY_READY)
-    return numpy, compiled_ready
+        chosen, upgrade = compiled, None
+    else:
+        start_build(rig)
+        click.echo(BUILDING, err=True)
+        warm_up(lambda: first_step(numpy), COMPILING_NUMPY, NUMPY_READY)
+        chosen, upgrade = numpy, compiled_ready
+    freeze_loaded()
+    return chosen, upgrade
 
 
 def start_build(rig: Path) -> bool:
     """Start the background build with ``rig`` unless one is running (a lock beside the
     marker holds its process id); True when this call started it."""
-    lock = _marker().with_suffix(".building")
+    lock = marker().with_suffix(".building")
     if _running(lock):
         return False
     with contextlib.suppress(FileNotFoundError):
@@ -169,14 +162,6 @@ def _running(lock: Path) -> bool:
     return True
 
 
-def _marker() -> Path:
-    """The build's marker: beside numba's cache of the step, named by the sources' stamp."""
-    from solver.compiled.kernel import step_kernel
-    from solver.jit import fingerprint
-
-    return Path(step_kernel._cache._cache_path) / f"puppetcli-built-{fingerprint()[:16]}"
-
-
 def _build(rig: str) -> None:
     """The background build (``start_build``): compile with the rig, then drop the lock."""
     from puppetcli.rig.load import load_rig
@@ -186,7 +171,7 @@ def _build(rig: str) -> None:
         compile_engine(build_model(load_rig(Path(rig))))
     finally:
         with contextlib.suppress(OSError):
-            _marker().with_suffix(".building").unlink()
+            marker().with_suffix(".building").unlink()
 
 
 if __name__ == "__main__":

@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
 Vec = tuple[float, float, float]
 
@@ -60,15 +61,24 @@ class HapticChain:
     def display_many(self, requested: np.ndarray) -> np.ndarray:
         """``display`` of each row of ``requested`` (n, 6: force, torque) in turn: the
         displayed (n, 6), the same floats as row by row, and the filter as after the last."""
-        y, filtered = self.filtered, []
-        for x in requested.tolist():
-            y = _low_pass(self.lowpass, y, x)
-            filtered.append(y)
-        self.filtered = y
-        shown = np.array(filtered).reshape(-1, 6)
+        y = np.array(self.filtered, dtype=float)
+        shown = np.empty((len(requested), 6))
+        _low_pass_rows(self.lowpass, y, np.asarray(requested, dtype=float), shown)
+        self.filtered = tuple(y.tolist())
         clamp_rows(shown[:, :3], self.max_force)
         clamp_rows(shown[:, 3:], self.max_torque)
         return shown
+
+
+@njit(cache=True)
+def _low_pass_rows(a: float, y: np.ndarray, x: np.ndarray, out: np.ndarray) -> None:
+    """``_low_pass`` over the rows of x (n, 6) into out, from and updating y (6,): the same
+    operations in the same order (compiled: one Python call for a batch of steps)."""
+    b = 1.0 - a
+    for k in range(x.shape[0]):
+        for j in range(6):
+            y[j] = a * y[j] + b * x[k, j]
+            out[k, j] = y[j]
 
 
 def _low_pass(a: float, y: tuple, x) -> tuple:

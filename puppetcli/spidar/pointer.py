@@ -19,9 +19,10 @@ from solver import quat, quat1
 from solver.rows.grip import Pointer
 
 
-def min_jerk(tau: float) -> float:
-    """s(τ) = 10τ³ − 15τ⁴ + 6τ⁵, clamped to [0, 1]."""
-    t = min(max(tau, 0.0), 1.0)
+def min_jerk(tau):
+    """s(τ) = 10τ³ − 15τ⁴ + 6τ⁵ with τ clamped to [0, 1], of a float or elementwise of an
+    array (the same floats either way)."""
+    t = np.clip(tau, 0.0, 1.0)
     return t * t * t * (10.0 + t * (-15.0 + 6.0 * t))
 
 
@@ -44,7 +45,7 @@ class Motion:
     def poses(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(positions (n,3), quaternions (n,4)) at each of ``times``."""
         if self.duration > 0.0:
-            s = np.array([min_jerk((t - self.t0) / self.duration) for t in times.tolist()])
+            s = min_jerk((times - self.t0) / self.duration)
         else:
             s = np.ones(len(times))
         s = s[:, None]

@@ -31,8 +31,9 @@ import numpy as np
 
 from solver import quat
 from solver.model import Model
-from solver.observe import bone_heads, bone_tails
+from solver.observe import points_on_bones
 from solver.rows.compliance import voigt_row
+from solver.rows.grip_kernel import segment_distances as distances
 from solver.rows.table import KIND_GRIP, Rows, angular_jacobians, concat, make_rows, point_jacobians
 from solver.state import State, StepInput
 
@@ -128,12 +129,24 @@ def coupling_wrench(rows: Rows, lam: np.ndarray) -> tuple[np.ndarray, np.ndarray
 
 def segment_distances(model: Model, state: State, pos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(distance (nbone,), closest point (nbone,3)) from ``pos`` to each bone's head–tail axis."""
-    head = bone_heads(model, state)
-    seg = bone_tails(model, state) - head
+    nb = len(model.bone_names)
+    rest = np.concatenate((model.bone_head0, model.bone_tail0))
+    ends = points_on_bones(model, state.body_pos, state.body_quat, rest, np.tile(np.arange(nb), 2))
+    head = ends[:nb]
+    seg = ends[nb:] - head
     length2 = np.maximum(np.einsum("ni,ni->n", seg, seg), 1e-18)
     s = np.clip(np.einsum("ni,ni->n", pos - head, seg) / length2, 0.0, 1.0)
     closest = head + s[:, None] * seg
     return np.linalg.norm(closest - pos, axis=1), closest
+
+
+def any_within(model: Model, state: State, pos: np.ndarray, gap: float) -> bool:
+    """Some bone's head–tail axis is within ``gap`` of ``pos``: ``segment_distances``
+    compiled (a run asks it every step while a released pointer clears the bones)."""
+    dist = np.empty(len(model.bone_names))
+    distances(state.body_pos, state.body_quat, model.body_pos0, model.bone_head0,
+              model.bone_tail0, np.asarray(pos, dtype=float), dist)  # fmt: skip
+    return bool(np.any(dist <= gap))
 
 
 def nearest_point(

@@ -6,12 +6,16 @@ from solver.collide.pointer_kernel import POINTER_KEY_OFFSET
 from solver.jit import kernel
 from solver.kin_kernel import (
     add,
+    clip,
     cross,
+    dot,
+    norm,
     qconj,
     qlog,
     qmul,
     qrotate,
     quat_at,
+    scale,
     sub,
     vec,
 )
@@ -60,3 +64,17 @@ def is_touch_row(key, kind):
 
 
 MODE_NONE, MODE_GRIP, MODE_TOUCH = 0, 1, 2
+
+
+@kernel(error_model="numpy")
+def segment_distances(pos, quat, pos0, head0, tail0, point, out):
+    """solver.rows.grip.segment_distances's distances, the same floats, into out (nbone,):
+    from ``point`` to each bone's head–tail axis, the bones at (pos, quat) of rest pose
+    pos0 with rest ends head0, tail0."""
+    for b in range(out.shape[0]):
+        q, p, rest = quat_at(quat, b), vec(pos, b), vec(pos0, b)
+        head = add(p, qrotate(q, sub(vec(head0, b), rest)))
+        seg = sub(add(p, qrotate(q, sub(vec(tail0, b), rest))), head)
+        length2 = max(dot(seg, seg), 1e-18)
+        s = clip(dot(sub(point, head), seg) / length2, 0.0, 1.0)
+        out[b] = norm(sub(add(head, scale(s, seg)), point))

@@ -25,6 +25,8 @@ from solver.compiled.pack import pack
 from solver.compiled.views import packed_view
 from solver.model import build_model
 from solver.rows.build import build_rows
+from solver.rows.grip import any_within, segment_distances
+from solver.rows.grip_kernel import segment_distances as compiled_distances
 from solver.rows.joints import joint_frames
 from solver.rows.joints import limit_rows as numpy_limit_rows
 from solver.rows.joints_kernel import LIMIT_SLACK, limit_arrays, limit_rows
@@ -370,3 +372,30 @@ def test_limit_rows_at_their_margins_equal_numpys(limits):
         assert np.abs(rw.bias[:n] - want.bias).max(initial=0.0) < 1e-9
         made, skipped = made + n, skipped + 3 * model.njoint - n
     assert made > 100 and skipped > 100
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_compiled_segment_distances_are_the_numpy_ones(seed):
+    """The distances a released pointer is checked against, compiled (``any_within``):
+    the same floats as solver.rows.grip.segment_distances, bones anywhere, turned anyhow,
+    the point anywhere (ends of the axis included)."""
+    rng = np.random.default_rng(seed)
+    model = build_model(chain(6, 0.005))
+    state = initial_state(model)
+    n = len(model.body_pos0)
+    state = replace(
+        state,
+        body_pos=state.body_pos + rng.normal(scale=0.3, size=(n, 3)),
+        body_quat=quat.normalize(rng.normal(size=(n, 4))),
+    )
+    nb = len(model.bone_names)
+    for point in rng.normal(scale=0.5, size=(50, 3)):
+        want, _ = segment_distances(model, state, point)
+        got = np.empty(nb)
+        compiled_distances(state.body_pos, state.body_quat, model.body_pos0, model.bone_head0,
+                           model.bone_tail0, point, got)  # fmt: skip
+        np.testing.assert_array_equal(got, want)
+        gap = float(np.sort(want)[1])  # the second nearest bone: one is within, exactly on it
+        assert any_within(model, state, point, gap) and not any_within(
+            model, state, point, want.min() / 2
+        )

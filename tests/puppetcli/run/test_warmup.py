@@ -83,7 +83,7 @@ class _Child:
 
 def test_one_background_build_at_a_time(monkeypatch, tmp_path):
     started = []
-    monkeypatch.setattr(warmup, "_marker", lambda: tmp_path / "built")
+    monkeypatch.setattr(warmup, "marker", lambda: tmp_path / "built")
     monkeypatch.setattr(
         warmup.subprocess, "Popen", lambda args, **kw: started.append(args) or _Child(os.getpid())
     )

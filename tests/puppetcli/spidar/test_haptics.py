@@ -116,11 +116,15 @@ def test_haptic_chain_over_many_steps_is_the_chain_step_by_step():
     # display_many (a batch's wrenches) against display called row by row: the same floats.
     rng = np.random.default_rng(3)
     requested = rng.normal(scale=15.0, size=(400, 6))
+    requested[::7] = -0.0  # no wrench, as a free pointer touching nothing asks: signs of zero
+    requested[::11, :3] = 0.0
     for lowpass in (0.0, 0.6, 0.95):
         one, many = HapticChain(20.0, 2.0, lowpass), HapticChain(20.0, 2.0, lowpass)
         rows = [np.concatenate(one.display(r[:3], r[3:])) for r in requested]
         shown = many.display_many(requested[:150])
         shown = np.vstack((shown, many.display_many(requested[150:])))
         assert np.array_equal(np.array(rows), shown)
+        assert np.array_equal(np.signbit(rows), np.signbit(shown))
         assert one.filtered == many.filtered
+        assert np.array_equal(np.signbit(one.filtered), np.signbit(many.filtered))
         assert (np.linalg.norm(shown[:, :3], axis=1) <= 20.0 + 1e-12).all()

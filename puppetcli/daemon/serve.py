@@ -1,0 +1,234 @@
+"""The daemon (``python -m puppetcli.daemon.serve RIG``): import every command, load the
+compiled solver with RIG, then listen on the installation's socket and fork a process
+per command (protocol: puppetcli.daemon.client).
+
+Started by ``start`` after a run on the compiled solver, detached, one per socket: the
+socket is bound only once everything is loaded, and a second daemon finds it taken.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import gc
+import importlib
+import io
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+import time
+import traceback
+from pathlib import Path
+
+from puppetcli.daemon.address import IDLE, INSIDE, enabled, pid_file, socket_path
+from puppetcli.daemon.client import FORWARDED, HEADER
+
+__all__ = ["serve", "start"]
+
+MAX_REQUEST = 16 << 20  # bytes: an environment and an argument list, with room to spare
+STARTING_AGE = 120.0  # s: a daemon still loading after this (a first compile?) is presumed dead
+
+
+def start(rig: Path) -> bool:
+    """Start a daemon loaded with ``rig`` unless daemons are off or one serves already;
+    True when this call started one."""
+    if not enabled() or os.environ.get(INSIDE):
+        return False
+    path = socket_path()
+    if path is None or path.exists() or not _claim(path.with_suffix(".starting")):
+        return False
+    subprocess.Popen(
+        [sys.executable, "-m", "puppetcli.daemon.serve", str(Path(rig).resolve())],
+        stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )  # fmt: skip
+    return True
+
+
+def _claim(starting: Path) -> bool:
+    """Take the right to start the daemon (many commands at once start one, not many): the
+    marker ``starting`` is made here, unless one younger than STARTING_AGE exists."""
+    with contextlib.suppress(OSError):
+        if time.time() - starting.stat().st_mtime < STARTING_AGE:
+            return False
+        starting.unlink()
+    try:
+        os.close(os.open(starting, os.O_CREAT | os.O_EXCL | os.O_WRONLY, 0o600))
+    except OSError:
+        return False
+    return True
+
+
+def serve(rig: str) -> None:
+    """Load, then answer commands until IDLE seconds pass without one."""
+    path = socket_path()
+    if path is None:
+        return
+    try:
+        _load(rig)
+        listener = _bind(path)
+    finally:
+        with contextlib.suppress(OSError):
+            path.with_suffix(".starting").unlink()
+    if listener is None:
+        return
+    signal.signal(signal.SIGCHLD, signal.SIG_IGN)  # commands' processes reap themselves
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))  # ``puppetcli daemon stop``
+    listener.settimeout(IDLE)
+    try:
+        pid_file(path).write_text(str(os.getpid()))
+        while True:
+            try:
+                conn, _ = listener.accept()
+            except TimeoutError:
+                break
+            with conn:
+                _fork(conn, listener)
+    finally:
+        listener.close()
+        for owned in (path, pid_file(path)):
+            with contextlib.suppress(OSError):
+                owned.unlink()
+
+
+def _load(rig: str) -> None:
+    """Import every command and what it loads, and the compiled solver's code paths."""
+    from puppetcli.cli import COMMANDS
+    from puppetcli.rig.load import load_rig
+    from puppetcli.run.build import compile_engine
+    from solver.model import build_model
+
+    for module in COMMANDS.values():
+        importlib.import_module(module)
+    compile_engine(build_model(load_rig(Path(rig))))
+    gc.collect()
+    gc.freeze()  # a command's garbage collections leave the loaded objects' pages shared
+
+
+def _bind(path: Path) -> socket.socket | None:
+    """A listening socket at ``path``; None when a live daemon holds it."""
+    listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    try:
+        listener.bind(str(path))
+    except OSError:
+        listener.close()
+        return None
+    listener.listen(16)
+    return listener
+
+
+def _fork(conn: socket.socket, listener: socket.socket) -> None:
+    """Run the request on ``conn`` in a child process; the daemon goes back to listening."""
+    try:
+        message, fds, _flags, _addr = socket.recv_fds(conn, 1 << 16, 3)
+        request = _read_request(conn, message)
+    except (OSError, ValueError):
+        return
+    if len(fds) != 3 or _peer_uid(conn) != os.getuid():
+        for fd in fds:
+            os.close(fd)
+        return
+    if os.fork() == 0:
+        listener.close()
+        os._exit(_child(conn, request, fds))
+    for fd in fds:
+        os.close(fd)
+
+
+def _read_request(conn: socket.socket, message: bytes) -> dict:
+    """The JSON request whose first bytes are ``message``."""
+    size = int.from_bytes(message[:HEADER], "big")
+    if size > MAX_REQUEST:
+        raise ValueError(f"request of {size} bytes")
+    body = bytearray(message[HEADER:])
+    while len(body) < size:
+        chunk = conn.recv(size - len(body))
+        if not chunk:
+            raise ValueError("request cut short")
+        body += chunk
+    return json.loads(body)
+
+
+def _peer_uid(conn: socket.socket) -> int:
+    """The user id of the process at the other end of ``conn``."""
+    creds = conn.getsockopt(socket.SOL_SOCKET, socket.SO_PEERCRED, 12)
+    return int.from_bytes(creds[4:8], sys.byteorder)
+
+
+def _child(conn: socket.socket, request: dict, fds: list[int]) -> int:
+    """In the forked process: become the client's command and run it; its exit status."""
+    for number in (signal.SIGCHLD, *FORWARDED):
+        signal.signal(number, signal.default_int_handler if number == signal.SIGINT
+                      else signal.SIG_DFL)  # fmt: skip
+    conn.sendall(f"P{os.getpid()}\n".encode())
+    threading.Thread(target=_hang_up_with, args=(conn,), daemon=True).start()
+    for target, fd in enumerate(fds):
+        os.dup2(fd, target)
+        os.close(fd)
+    _reopen_stdio()
+    os.environ.clear()
+    os.environ.update(request["env"], **{INSIDE: "1"})
+    code = _run(request["argv"], request["cwd"])
+    with contextlib.suppress(OSError):
+        conn.sendall(f"X{code}\n".encode())
+    return code
+
+
+def _hang_up_with(conn: socket.socket) -> None:
+    """When the client goes away (killed, say), the command gets the SIGHUP a process
+    gets when its terminal closes."""
+    with contextlib.suppress(OSError):
+        while conn.recv(1 << 10):
+            pass
+    os.kill(os.getpid(), signal.SIGHUP)
+
+
+def _reopen_stdio() -> None:
+    """Text streams on the client's descriptors, buffered as Python would buffer them."""
+    sys.stdin = io.TextIOWrapper(io.FileIO(0, "r", closefd=False), encoding=sys.stdin.encoding)
+    for name, fd in (("stdout", 1), ("stderr", 2)):
+        old = getattr(sys, name)
+        stream = io.TextIOWrapper(
+            io.FileIO(fd, "w", closefd=False), encoding=old.encoding, errors=old.errors,
+            line_buffering=fd == 2 or os.isatty(fd), write_through=fd == 2,
+        )  # fmt: skip
+        setattr(sys, name, stream)
+
+
+def _run(argv: list[str], cwd: str) -> int:
+    """``puppetcli ARGV`` in ``cwd`` as the console entry runs it; its exit status."""
+    from puppetcli.cli import cli
+
+    code = 0
+    try:
+        os.chdir(cwd)
+        cli.main(args=argv, prog_name="puppetcli")
+    except SystemExit as exc:
+        code = _exit_status(exc.code)
+    except BaseException:  # what the interpreter does with an uncaught one
+        traceback.print_exc()
+        code = 1
+    for thread in threading.enumerate():
+        if thread is not threading.main_thread() and not thread.daemon:
+            thread.join()
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(OSError, ValueError):
+            stream.flush()
+    return code
+
+
+def _exit_status(code) -> int:
+    """The exit status ``sys.exit(code)`` gives (a message is printed, status 1)."""
+    if code is None:
+        return 0
+    if isinstance(code, int):
+        return code & 0xFF
+    print(code, file=sys.stderr)
+    return 1
+
+
+if __name__ == "__main__":
+    serve(sys.argv[1])
