@@ -18,6 +18,7 @@ import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 import traceback
@@ -67,6 +68,7 @@ def serve(rig: str) -> None:
     path = socket_path()
     if path is None:
         return
+    os.environ[INSIDE] = "1"  # its rehearsal starts no other daemon
     try:
         _load(rig)
         listener = _bind(path)
@@ -95,7 +97,9 @@ def serve(rig: str) -> None:
 
 
 def _load(rig: str) -> None:
-    """Import every command and what it loads, and the compiled solver's code paths."""
+    """Import every command and what it loads, load the compiled solver's code paths, and
+    rehearse a pose so that what loads on first use (numba's other kernels, OpenCV, the
+    trace's templates) is loaded here, once, not in every command."""
     from puppetcli.cli import COMMANDS
     from puppetcli.rig.load import load_rig
     from puppetcli.run.build import compile_engine
@@ -103,9 +107,34 @@ def _load(rig: str) -> None:
 
     for module in COMMANDS.values():
         importlib.import_module(module)
-    compile_engine(build_model(load_rig(Path(rig))))
+    spec = load_rig(Path(rig))
+    compile_engine(build_model(spec))
+    with contextlib.suppress(Exception):  # a rig it cannot rehearse on is served all the same
+        _rehearse(Path(rig), spec)
     gc.collect()
     gc.freeze()  # a command's garbage collections leave the loaded objects' pages shared
+
+
+def _rehearse(rig: Path, spec) -> None:
+    """``pose`` RIG with a script that grips a leaf bone, pulls, lets go, clears and takes a
+    key, into a folder thrown away (its output too)."""
+    from puppetcli.cli import cli
+
+    bone = spec.bones[-1]
+    x, y, z = (float(v) for v in bone.tail)
+    script = (
+        f"pointer: {{start: [{x!r}, {y!r}, {z!r}]}}\nactions:\n"
+        f"  - grip: {{bone: {bone.name}}}\n"
+        "  - move: {by: [0.0, 0.02, 0.0], duration: 0.05}\n"
+        "  - release:\n"
+        "  - move: {by: [0.0, 0.0, 0.2], duration: 0.05}\n"
+        "  - key: rehearsal\n"
+    )
+    with tempfile.TemporaryDirectory() as tmp, open(os.devnull, "w") as null:
+        (Path(tmp) / "script.yaml").write_text(script)
+        args = ["pose", str(rig), str(Path(tmp) / "script.yaml"), "-o", str(Path(tmp) / "out")]
+        with contextlib.redirect_stdout(null), contextlib.redirect_stderr(null):
+            cli.main(args=args, prog_name="puppetcli", standalone_mode=False)
 
 
 def _bind(path: Path) -> socket.socket | None:

@@ -44,7 +44,7 @@ def _fixed(points: np.ndarray) -> np.ndarray:
 
 def shade(color: tuple[int, int, int], brightness: float) -> tuple[int, int, int]:
     """``color`` scaled by ``brightness`` (clipped to 0 … 255)."""
-    return tuple(int(np.clip(round(c * brightness), 0, 255)) for c in color)  # type: ignore[return-value]
+    return tuple(min(max(round(c * brightness), 0), 255) for c in color)  # type: ignore[return-value]
 
 
 def fill_polygon(img: np.ndarray, points: np.ndarray, color: tuple[int, int, int]) -> None:
