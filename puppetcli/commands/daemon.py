@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 
@@ -32,7 +33,8 @@ def status() -> None:
 @command.command("stop")
 def stop() -> None:
     """Stop every daemon of this user (running commands finish)."""
-    daemons = running()
-    for pid, _path in daemons:
-        os.kill(pid, signal.SIGTERM)
-    click.echo(f"stopped {len(daemons)} daemon{'s' * (len(daemons) != 1)}")
+    pids = sorted({pid for pid, _path in running()})
+    for pid in pids:
+        with contextlib.suppress(ProcessLookupError):  # it ended meanwhile
+            os.kill(pid, signal.SIGTERM)
+    click.echo(f"stopped {len(pids)} daemon{'s' * (len(pids) != 1)}")

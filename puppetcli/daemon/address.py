@@ -57,10 +57,10 @@ def pid_file(socket: Path) -> Path:
 
 
 def running() -> list[tuple[int, Path]]:
-    """(process id, socket) of this user's live daemons."""
+    """(process id, socket) of this user's live daemons, those still loading included."""
     base = folder()
     found = []
-    for path in sorted(base.glob("*.pid")) if base else []:
+    for path in sorted([*base.glob("*.pid"), *base.glob("*.starting")]) if base else []:
         try:
             pid = int(path.read_text())
             os.kill(pid, 0)

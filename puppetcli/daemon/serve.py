@@ -41,19 +41,22 @@ def start(rig: Path) -> bool:
     path = socket_path()
     if path is None or path.exists() or not _claim(path.with_suffix(".starting")):
         return False
-    subprocess.Popen(
+    child = subprocess.Popen(
         [sys.executable, "-m", "puppetcli.daemon.serve", str(Path(rig).resolve())],
         stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
         start_new_session=True,
     )  # fmt: skip
+    with contextlib.suppress(OSError):  # ``daemon stop`` finds it from now on
+        path.with_suffix(".starting").write_text(str(child.pid))
     return True
 
 
 def _claim(starting: Path) -> bool:
     """Take the right to start the daemon (many commands at once start one, not many): the
-    marker ``starting`` is made here, unless one younger than STARTING_AGE exists."""
+    marker ``starting`` is made here, unless a live daemon's is there (it writes its process
+    id in it) or one younger than STARTING_AGE whose process has not written it yet."""
     with contextlib.suppress(OSError):
-        if time.time() - starting.stat().st_mtime < STARTING_AGE:
+        if _alive(starting) or time.time() - starting.stat().st_mtime < STARTING_AGE:
             return False
         starting.unlink()
     try:
@@ -63,22 +66,35 @@ def _claim(starting: Path) -> bool:
     return True
 
 
+def _alive(starting: Path) -> bool:
+    """``starting`` names a live process."""
+    try:
+        pid = int(starting.read_text())
+        os.kill(pid, 0)
+    except (OSError, ValueError):
+        return False
+    return pid > 0
+
+
 def serve(rig: str) -> None:
-    """Load, then answer commands until IDLE seconds pass without one."""
+    """Load, then answer commands until IDLE seconds pass without one.  While it loads, its
+    process id is in the socket's ``.starting`` file (``puppetcli daemon stop`` finds it)."""
     path = socket_path()
     if path is None:
         return
+    starting = path.with_suffix(".starting")
     os.environ[INSIDE] = "1"  # its rehearsal starts no other daemon
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))  # ``puppetcli daemon stop``
     try:
-        _load(rig)
+        starting.write_text(str(os.getpid()))
+        cv_threads = _load(rig)
         listener = _bind(path)
     finally:
         with contextlib.suppress(OSError):
-            path.with_suffix(".starting").unlink()
+            starting.unlink()
     if listener is None:
         return
     signal.signal(signal.SIGCHLD, signal.SIG_IGN)  # commands' processes reap themselves
-    signal.signal(signal.SIGTERM, lambda *_: sys.exit(0))  # ``puppetcli daemon stop``
     listener.settimeout(IDLE)
     try:
         pid_file(path).write_text(str(os.getpid()))
@@ -88,7 +104,7 @@ def serve(rig: str) -> None:
             except TimeoutError:
                 break
             with conn:
-                _fork(conn, listener)
+                _fork(conn, listener, cv_threads)
     finally:
         listener.close()
         for owned in (path, pid_file(path)):
@@ -96,10 +112,14 @@ def serve(rig: str) -> None:
                 owned.unlink()
 
 
-def _load(rig: str) -> None:
+def _load(rig: str) -> int:
     """Import every command and what it loads, load the compiled solver's code paths, and
     rehearse a pose so that what loads on first use (numba's other kernels, OpenCV, the
-    trace's templates) is loaded here, once, not in every command."""
+    trace's templates) is loaded here, once, not in every command.  OpenCV runs single-threaded
+    here (no worker threads to lose in a fork); its own thread count is returned, for the
+    commands."""
+    import cv2
+
     from puppetcli.cli import COMMANDS
     from puppetcli.rig.load import load_rig
     from puppetcli.run.build import compile_engine
@@ -107,12 +127,15 @@ def _load(rig: str) -> None:
 
     for module in COMMANDS.values():
         importlib.import_module(module)
+    cv_threads = cv2.getNumThreads()
+    cv2.setNumThreads(1)
     spec = load_rig(Path(rig))
     compile_engine(build_model(spec))
     with contextlib.suppress(Exception):  # a rig it cannot rehearse on is served all the same
         _rehearse(Path(rig), spec)
     gc.collect()
     gc.freeze()  # a command's garbage collections leave the loaded objects' pages shared
+    return cv_threads
 
 
 def _rehearse(rig: Path, spec) -> None:
@@ -149,7 +172,7 @@ def _bind(path: Path) -> socket.socket | None:
     return listener
 
 
-def _fork(conn: socket.socket, listener: socket.socket) -> None:
+def _fork(conn: socket.socket, listener: socket.socket, cv_threads: int) -> None:
     """Run the request on ``conn`` in a child process; the daemon goes back to listening."""
     try:
         message, fds, _flags, _addr = socket.recv_fds(conn, 1 << 16, 3)
@@ -162,7 +185,7 @@ def _fork(conn: socket.socket, listener: socket.socket) -> None:
         return
     if os.fork() == 0:
         listener.close()
-        os._exit(_child(conn, request, fds))
+        os._exit(_child(conn, request, fds, cv_threads))
     for fd in fds:
         os.close(fd)
 
@@ -187,8 +210,11 @@ def _peer_uid(conn: socket.socket) -> int:
     return int.from_bytes(creds[4:8], sys.byteorder)
 
 
-def _child(conn: socket.socket, request: dict, fds: list[int]) -> int:
+def _child(conn: socket.socket, request: dict, fds: list[int], cv_threads: int) -> int:
     """In the forked process: become the client's command and run it; its exit status."""
+    import cv2
+
+    cv2.setNumThreads(cv_threads)  # OpenCV's own pool, started in this process
     for number in (signal.SIGCHLD, *FORWARDED):
         signal.signal(number, signal.default_int_handler if number == signal.SIGINT
                       else signal.SIG_DFL)  # fmt: skip

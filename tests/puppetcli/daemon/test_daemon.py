@@ -73,6 +73,12 @@ def _timeless(text: str) -> list[str]:
     return [line.split(" in ")[0] for line in text.splitlines()]
 
 
+def test_the_daemon_forks_with_no_other_thread(daemon):
+    """A fork copies only the thread that forks: the daemon runs no other (OpenCV's worker
+    pool, say) whose state its commands would inherit without the thread."""
+    assert len(list(Path(f"/proc/{daemon.pid}/task").iterdir())) == 1
+
+
 def test_a_mistake_ends_the_same_way(daemon, tmp_path, monkeypatch, capfd):
     monkeypatch.chdir(tmp_path)
     (tmp_path / "bad.yaml").write_text("bones: [1, 2\n")
@@ -148,14 +154,42 @@ def test_stop_ends_every_daemon(daemon):
     assert not socket_path().exists()
 
 
+class _Child:
+    def __init__(self, pid: int) -> None:
+        self.pid = pid
+
+
 def test_many_commands_at_once_start_one_daemon(monkeypatch, tmp_path):
     monkeypatch.setenv("XDG_RUNTIME_DIR", str(tmp_path))
     monkeypatch.setenv(SWITCH, "auto")
     started = []
-    monkeypatch.setattr(serve.subprocess, "Popen", lambda args, **kw: started.append(args))
+    gone = subprocess.Popen(["true"])  # a process id that names no live process
+    gone.wait()
+    monkeypatch.setattr(
+        serve.subprocess, "Popen", lambda args, **kw: started.append(args) or _Child(gone.pid)
+    )
     assert serve.start(RIG) and not serve.start(RIG)  # the second finds the first starting
     assert len(started) == 1
     starting = socket_path().with_suffix(".starting")
+    assert starting.read_text() == str(gone.pid)  # the child's, for ``daemon stop``
     old = time.time() - serve.STARTING_AGE - 1.0
     os.utime(starting, (old, old))  # a start that never finished
     assert serve.start(RIG) and len(started) == 2
+
+
+def test_stop_ends_a_daemon_still_loading(monkeypatch, tmp_path):
+    monkeypatch.setenv("XDG_RUNTIME_DIR", str(tmp_path))
+    process = subprocess.Popen(
+        [sys.executable, "-m", "puppetcli.daemon.serve", str(RIG)], start_new_session=True
+    )
+    starting = socket_path().with_suffix(".starting")
+    deadline = time.monotonic() + 60.0
+    while not (starting.exists() and starting.read_text()) and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert [pid for pid, _ in running()] == [process.pid]
+    result = subprocess.run(
+        [sys.executable, "-m", "puppetcli", "daemon", "stop"], capture_output=True, text=True
+    )
+    assert result.stdout.strip() == "stopped 1 daemon"
+    process.wait(timeout=30)
+    assert not starting.exists() and not socket_path().exists()
