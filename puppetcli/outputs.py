@@ -12,7 +12,7 @@ from __future__ import annotations
 import itertools
 import os
 from collections.abc import Iterator, Sequence
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from pathlib import Path
 from typing import Any
 
@@ -29,15 +29,20 @@ __all__ = [
 
 # Distinguishes several temporaries for one target inside a single process.
 _counter = itertools.count()
+SHORT_NAME = 200  # characters of a target's name that leave room for the temporary's tag
 
 
 class OutputError(PuppetError):
-    """An output cannot be written (exists without --force, or is not a directory)."""
+    """An output cannot be written (exists without --force, is not a directory, or the file
+    system refuses it)."""
 
 
 def _temp_path(path: Path) -> Path:
-    """A hidden, unique temporary name next to ``path`` (same filesystem, so rename is atomic)."""
-    return path.with_name(f".{path.name}.tmp-{os.getpid()}-{next(_counter)}")
+    """A hidden, unique temporary name next to ``path`` (same filesystem, so rename is atomic);
+    for a name near the file system's limit, a short one (the target's own name must fit)."""
+    tag = f"tmp-{os.getpid()}-{next(_counter)}"
+    name = f".{path.name}.{tag}" if len(path.name) <= SHORT_NAME else f".puppetcli-{tag}"
+    return path.with_name(name)
 
 
 @contextmanager
@@ -48,22 +53,44 @@ def atomic_path(path: Path, *, keep_on_error: bool = False) -> Iterator[Path]:
     the temporary is published anyway if ``keep_on_error`` (used for traces:
     whatever was captured before a simulation error is kept) and removed
     otherwise.  If the block never created the temporary, ``path`` is untouched.
+    The file system refusing the temporary or the target (a missing or unwritable
+    folder, a name too long, a directory in the way) is an ``OutputError`` naming
+    ``path``: one line for the user, not a traceback.
     """
     path = Path(path)
     tmp = _temp_path(path)
     try:
         yield tmp
-    except BaseException:
-        if keep_on_error and tmp.exists():
-            os.replace(tmp, path)
-        else:
-            tmp.unlink(missing_ok=True)
+    except BaseException as exc:
+        _settle(tmp, path if keep_on_error else None)
+        if isinstance(exc, OSError) and _names(exc, tmp, path):
+            raise _cannot_write(path, exc) from exc
         raise
     try:
         os.replace(tmp, path)
-    except BaseException:
+    except OSError as exc:
+        _settle(tmp, None)
+        raise _cannot_write(path, exc) from exc
+
+
+def _settle(tmp: Path, publish: Path | None) -> None:
+    """After a failed block: publish ``tmp`` as ``publish`` when given and possible, else
+    remove it; never raise (the block's own error is the one to report)."""
+    with suppress(OSError):
+        if publish is not None and tmp.exists():
+            os.replace(tmp, publish)
+            return
         tmp.unlink(missing_ok=True)
-        raise
+
+
+def _names(exc: OSError, *paths: Path) -> bool:
+    """``exc`` is about one of ``paths``."""
+    named = {os.fspath(f) for f in (exc.filename, exc.filename2) if f is not None}
+    return bool(named & {os.fspath(p) for p in paths})
+
+
+def _cannot_write(path: Path, exc: OSError) -> OutputError:
+    return OutputError(f"{path}: cannot write: {exc.strerror or exc}")
 
 
 def write_text_atomic(path: Path, text: str) -> None:

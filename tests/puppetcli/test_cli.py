@@ -457,3 +457,13 @@ def test_unknown_command_is_a_usage_error():
     assert result.exit_code == 2
     assert "No such command 'nosuchcommand'" in result.stderr
     assert "Traceback" not in result.output
+
+
+def test_an_output_the_file_system_refuses_is_one_line_and_the_trace_is_kept(tmp_path):
+    """pose --force into a folder where keyframes.json is a directory: the run's trace is
+    written, then the keys' JSON cannot be, and that is one line naming it, exit 1."""
+    (tmp_path / "out" / "keyframes.json").mkdir(parents=True)
+    result = invoke("pose", DOLL, ROOT / "scripts" / "wave.yaml", "-o", tmp_path / "out", "--force")
+    assert_one_error(result, f"error: {tmp_path / 'out' / 'keyframes.json'}: cannot write: ")
+    assert (tmp_path / "out" / "trace.mcap").stat().st_size > 0
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["keyframes.json", "trace.mcap"]

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -140,3 +141,35 @@ def test_prepare_outdir_rejects_a_file(tmp_path: Path) -> None:
     not_dir.write_text("x")
     with pytest.raises(OutputError, match="exists and is not a directory"):
         prepare_outdir(not_dir, ["trace.mcap"], force=True)
+
+
+def _name_max(folder: Path) -> int:
+    return os.pathconf(folder, "PC_NAME_MAX")
+
+
+@pytest.mark.parametrize("case", ["missing folder", "directory in the way", "name too long"])
+def test_a_refused_output_is_one_output_error_and_leaves_nothing(tmp_path: Path, case: str):
+    target = {
+        "missing folder": tmp_path / "nowhere" / "out.json",
+        "directory in the way": tmp_path / "out.json",
+        "name too long": tmp_path / ("a" * (_name_max(tmp_path) + 1)),
+    }[case]
+    if case == "directory in the way":
+        target.mkdir()
+    with pytest.raises(OutputError) as caught:
+        write_text_atomic(target, "{}\n")
+    message = str(caught.value)
+    assert message.startswith(f"{target}: cannot write: ") and "\n" not in message
+    assert listing(tmp_path) == (["out.json"] if case == "directory in the way" else [])
+
+
+def test_a_name_at_the_limit_is_written_through_a_short_temporary(tmp_path: Path):
+    target = tmp_path / ("a" * (_name_max(tmp_path) - 5) + ".json")  # no room for a tag
+    write_text_atomic(target, "{}\n")
+    assert target.read_text() == "{}\n" and listing(tmp_path) == [target.name]
+
+
+def test_a_block_failing_on_another_file_keeps_its_own_error(tmp_path: Path):
+    with pytest.raises(FileNotFoundError), atomic_path(tmp_path / "out.txt"):
+        open(tmp_path / "some input")  # noqa: SIM115  (an input of the block, not the output)
+    assert listing(tmp_path) == []
