@@ -44,10 +44,13 @@ from solver import quat
 __all__ = [
     "PUPPET_FRAME",
     "STEP_CHANNELS",
+    "TIME_SLOTS",
     "WORLD_FRAME",
     "TraceError",
     "TraceWriter",
     "bones_scene",
+    "clock",
+    "foxglove_time",
     "frame_transforms",
     "load_schema",
     "ns_from_seconds",
@@ -68,6 +71,8 @@ _IDENTITY_POSE = {
     "position": {"x": 0.0, "y": 0.0, "z": 0.0},
     "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0},
 }
+# A Foxglove ``time`` in a message template, and the groups its numbers (``clock``) fill.
+TIME_SLOTS = ({"sec": Slot("sec"), "nsec": Slot("nsec")}, [("sec", 1), ("nsec", 1)])
 _STATS_KEYS = ("rows", "contacts", "iterations", "residual", "solver")
 STEP_CHANNELS = {
     "/tf": "foxglove.FrameTransforms",
@@ -103,9 +108,15 @@ def ns_from_seconds(t: float) -> int:
     return round(t * 1e9)
 
 
-def _stamp(ns: int) -> dict:
+def foxglove_time(ns: int) -> dict:
     """Foxglove ``time`` of integer nanoseconds."""
-    return {"sec": ns // 1_000_000_000, "nsec": ns % 1_000_000_000}
+    return dict(zip(("sec", "nsec"), clock(ns), strict=True))
+
+
+def clock(ns: int) -> tuple[int, int]:
+    """(seconds, nanoseconds) of integer nanoseconds: the numbers of a Foxglove ``time``, as
+    a message template (puppetcli.mcap.template) takes them for ``TIME_SLOTS``."""
+    return divmod(ns, 1_000_000_000)
 
 
 def _vec3s(points: np.ndarray) -> list[dict]:
@@ -123,7 +134,7 @@ def frame_transforms(
 ) -> dict:
     """``foxglove.FrameTransforms``: world → puppet, then each bone in its parent's frame."""
     move, turn = relative_frames(bone_parents, head, rot)
-    return _transforms_message(_stamp(ns), bone_names, bone_parents, move, turn)
+    return _transforms_message(foxglove_time(ns), bone_names, bone_parents, move, turn)
 
 
 def relative_frames(
@@ -165,27 +176,13 @@ def _transforms_message(
 
 def bones_scene(ns: int, head: np.ndarray, tail: np.ndarray) -> dict:
     """``foxglove.SceneUpdate``: in ``puppet``, a LINE_LIST head→tail per bone and head balls."""
-    return _bones_message(_stamp(ns), head, tail)
+    return _bones_message(foxglove_time(ns), head, tail)
 
 
 def _bones_message(stamp: dict, head: np.ndarray, tail: np.ndarray) -> dict:
     segments = np.stack((head, tail), axis=1)
     diameter = JOINT_SPHERE_DIAMETER
     return scene_update(stamp, "bones", segments, head, BONE_COLOR, JOINT_COLOR, diameter)
-
-
-def line_scene(
-    ns: int,
-    entity_id: str,
-    segments: np.ndarray,
-    centres: np.ndarray,
-    line_color: dict,
-    sphere_color: dict,
-    diameter: float,
-) -> dict:
-    """``foxglove.SceneUpdate``: one entity in ``puppet``, segments (k,2,3) and balls (m,3)."""
-    stamp = _stamp(ns)
-    return scene_update(stamp, entity_id, segments, centres, line_color, sphere_color, diameter)
 
 
 def scene_update(
@@ -197,7 +194,8 @@ def scene_update(
     sphere_color: dict,
     diameter: float,
 ) -> dict:
-    """``line_scene`` at the Foxglove time ``stamp`` ({"sec", "nsec"})."""
+    """``foxglove.SceneUpdate`` at the Foxglove time ``stamp``: one entity in ``puppet``,
+    segments (k,2,3) and balls (m,3)."""
     line = {
         "type": 2,  # LINE_LIST: points pair up as (start, end)
         "pose": _IDENTITY_POSE,
@@ -385,7 +383,7 @@ class TraceWriter:
         tf, bones, joint = self._templates
         for i, t in enumerate(times):
             ns = self._check_time(t)
-            stamp = divmod(ns, 1_000_000_000)
+            stamp = clock(ns)
             encoded = {
                 "/tf": tf.fill([*stamp, *move[i], *turn[i]]),
                 "/puppet/bones": bones.fill([*stamp, *head[i], *tail[i]]),
@@ -401,8 +399,7 @@ class TraceWriter:
         """Templates (puppetcli.mcap.template) of ``/tf``, ``/puppet/bones`` and
         ``/puppet/joints``, the numbers in the order ``write_step`` fills them."""
         nb, nj = len(self.bone_names), len(self.joint_names)
-        stamp = {"sec": Slot("sec"), "nsec": Slot("nsec")}
-        clock = [("sec", 1), ("nsec", 1)]
+        stamp, time_groups = TIME_SLOTS
         move, turn = slots("move", (nb + 1, 3)), slots("turn", (nb + 1, 4))
         tf = _transforms_message(stamp, self.bone_names, self.bone_parents, move, turn)
         head, tail = slots("head", (nb, 3)), slots("tail", (nb, 3))
@@ -410,8 +407,8 @@ class TraceWriter:
         joint = slots("joint", (nj, 3, 3))
         joints = self._joints_message(Slot("t"), joint[:, 0], joint[:, 1], joint[:, 2])
         return (
-            MessageTemplate(tf, [*clock, ("move", move.size), ("turn", turn.size)]),
-            MessageTemplate(bones, [*clock, ("head", head.size), ("tail", tail.size)]),
+            MessageTemplate(tf, [*time_groups, ("move", move.size), ("turn", turn.size)]),
+            MessageTemplate(bones, [*time_groups, ("head", head.size), ("tail", tail.size)]),
             MessageTemplate(joints, [("t", 1), ("joint", joint.size)]),
         )
 

@@ -18,7 +18,14 @@ from pathlib import Path
 import numpy as np
 
 from puppetcli.mcap.template import MessageTemplate, Slot, slots
-from puppetcli.mcap.trace import TraceWriter, load_schema, scene_update
+from puppetcli.mcap.trace import (
+    TIME_SLOTS,
+    TraceWriter,
+    clock,
+    load_schema,
+    ns_from_seconds,
+    scene_update,
+)
 from puppetcli.script.load import Script
 from puppetcli.spidar.pointer import device_from_world
 from solver import quat
@@ -229,8 +236,7 @@ class DeviceMessages:
             b = coupling.body
             grip = body_pos[b] + quat.rotate(body_quat[b], coupling.anchor)
             segment = [*position, *grip.tolist()]
-        stamp = divmod(_ns(t), 1_000_000_000)
-        fill = [*stamp, *position, *segment]
+        fill = [*clock(ns_from_seconds(t)), *position, *segment]
         writer.write_encoded("/puppet/pointer", t, self._pointer(len(segment) // 6).fill(fill))
 
     def _pose(self, bone: str | None) -> MessageTemplate:
@@ -246,10 +252,10 @@ class DeviceMessages:
     def _pointer(self, segments: int) -> MessageTemplate:
         """The ``/puppet/pointer`` template with ``segments`` coupling lines (0 or 1)."""
         if segments not in self._pointers:
-            stamp = {"sec": Slot("sec"), "nsec": Slot("nsec")}
+            stamp, time_groups = TIME_SLOTS
             shape = pointer_scene(stamp, slots("segment", (segments, 2, 3)),
                                   slots("centre", (1, 3)), self.script)  # fmt: skip
-            groups = [("sec", 1), ("nsec", 1), ("centre", 3), ("segment", 6 * segments)]
+            groups = [*time_groups, ("centre", 3), ("segment", 6 * segments)]
             self._pointers[segments] = MessageTemplate(shape, groups)
         return self._pointers[segments]
 
@@ -259,7 +265,3 @@ def pointer_scene(stamp: dict, segments, centres, script: Script) -> dict:
     diameter = max(2.0 * script.pointer_radius, 0.01)
     return scene_update(stamp, "pointer", segments, centres, COUPLING_COLOR, POINTER_COLOR,
                         diameter)  # fmt: skip
-
-
-def _ns(t: float) -> int:
-    return round(t * 1e9)

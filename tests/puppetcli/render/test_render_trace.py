@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from test_render_fixtures import DOLL, doll, keys
 
-from puppetcli.mcap.trace import TraceWriter, line_scene, load_schema
+from puppetcli.mcap.trace import TraceWriter, foxglove_time, load_schema, scene_update
 from puppetcli.render.inputs import trace_poses
 from puppetcli.render.video import frame_indices
 from puppetcli.rig.skeleton import key_pose
@@ -37,7 +37,9 @@ def write_trace(path: Path, skel, ks, events: bool = True, pointer: bool = True)
             if pointer:
                 grip = tail[skel.names.index("hand_l")]
                 seg = np.array([[grip + [0.0, 0.1, 0.0], grip]])
-                scene = line_scene(round(k.time * 1e9), "pointer", seg, seg[:, 0], {}, {}, 0.04)
+                scene = scene_update(
+                    foxglove_time(round(k.time * 1e9)), "pointer", seg, seg[:, 0], {}, {}, 0.04
+                )
                 w.write("/puppet/pointer", k.time, scene)
 
 
