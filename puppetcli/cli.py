@@ -11,7 +11,7 @@ import importlib
 
 import click
 
-from solver.errors import PuppetError
+from puppetcli.errors import PuppetError, one_line
 
 COMMANDS = {
     "validate": "puppetcli.commands.validate",
@@ -58,8 +58,13 @@ class LazyGroup(click.Group):
         try:
             return super().invoke(ctx)
         except PuppetError as exc:
-            click.echo(f"error: {exc}", err=True)
+            click.echo(f"error: {one_line(str(exc))}", err=True)
             ctx.exit(1)
+        except click.UsageError as exc:  # a bad option or argument: one line too, status 2
+            where = exc.ctx.command_path if exc.ctx is not None else ctx.command_path
+            message = one_line(exc.format_message())
+            click.echo(f"error: {message} (see '{where} --help')", err=True)
+            ctx.exit(2)
 
 
 @click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})

@@ -27,14 +27,18 @@ import numpy as np
 import yaml
 from yaml.constructor import SafeConstructor
 
-from solver.errors import PuppetError
+from puppetcli.errors import PuppetError, clip
 
 __all__ = ["Fields", "Node", "did_you_mean", "load_file", "load_text"]
 
 ErrorType = type[PuppetError]
 T = TypeVar("T")
-_MAX_SHOWN = 40
 FAST_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml, when pyyaml has it
+# Every number read is at most LARGEST in magnitude, and a positive one at least SMALLEST:
+# products of a few such values (inertia = m·r², its inverse, their squares in the solver)
+# stay far inside float64, so no overflow reaches the arithmetic of a run.
+LARGEST = 1e9
+SMALLEST = 1e-9
 FAST_DEPTH = 5000  # libyaml's composer recurses in C: 10,000 levels pass, 100,000 crash
 
 
@@ -134,6 +138,7 @@ class Node:
         if isinstance(step, int):
             path = f"{self.path}[{step}]"
         else:
+            step = clip(step)
             path = f"{self.path}.{step}" if self.path else step
         return Node(node, self.source, path, self.error)
 
@@ -166,11 +171,11 @@ class Node:
         if isinstance(value, bool):
             return f"boolean {str(value).lower()}"
         if isinstance(value, (int, float)) or self._number_or_none() is not None:
-            return node.value  # numbers (and numeric strings such as 1e3) as written
+            return clip(node.value)  # numbers (and numeric strings such as 1e3) as written
         text = str(node.value)
         if not text:
             return "an empty string"
-        return f"'{text[:_MAX_SHOWN]}{'…' * (len(text) > _MAX_SHOWN)}'"
+        return f"'{clip(text)}'"
 
     def is_null(self) -> bool:
         """True for an explicit YAML null (``~``, ``null`` or nothing)."""
@@ -245,6 +250,10 @@ class Node:
         too_low = minimum is not None and (value <= minimum if exclusive else value < minimum)
         if too_low or (maximum is not None and value > maximum):
             self.fail(expected)
+        if abs(value) > LARGEST:
+            self.fail(f"{expected} of magnitude at most {LARGEST:g}")
+        if minimum == 0.0 and exclusive and value < SMALLEST:
+            self.fail(f"{expected} of at least {SMALLEST:g}")
         return value
 
     def positive(self) -> float:

@@ -17,13 +17,14 @@ non-finite values; fewer frame lines than ``Frames:`` says, or more.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import NoReturn
 
 import numpy as np
 
 from puppetcli.bvh.model import CHANNEL_NAMES, Bvh, BvhError, BvhJoint
-from puppetcli.yamldoc import did_you_mean
+from puppetcli.yamldoc import LARGEST, did_you_mean
 
 __all__ = ["bvh_from_text", "read_bvh"]
 
@@ -118,8 +119,50 @@ def _open_brace(lines: _Lines, opened: bool, what: str) -> None:
             lines.fail(f"'{{' opening {what}", _show(" ".join(tokens)))
 
 
+MAX_DEPTH = 200  # nested joints; real skeletons nest a few dozen (fingers of a full body ~ 12)
+
+
+@dataclass
+class _Open:
+    """A ROOT or JOINT block being read: its header, offset and channels, its End Sites."""
+
+    index: int
+    name: str
+    parent: int
+    offset: np.ndarray
+    channels: tuple[str, ...]
+    start: int
+    what: str
+    ends: list[np.ndarray] = field(default_factory=list)
+
+
 def _read_joint(lines: _Lines, tokens: list[str], parent: int, joints: list[BvhJoint]) -> None:
-    """A ROOT or JOINT block (its header already read); appends it and its subtree."""
+    """A ROOT block (its header already read) and its subtree, appended in file order; nested
+    blocks are read with a stack, so depth costs no recursion (it is bounded by MAX_DEPTH)."""
+    stack = [_open_joint(lines, tokens, parent, joints)]
+    while stack:
+        block = stack[-1]
+        closing = f"'JOINT', 'End Site' or '}}' closing {block.what} (line {block.start})"
+        tokens = lines.next(closing)
+        word = tokens[0].upper()
+        if word == "JOINT":
+            if len(stack) >= MAX_DEPTH:
+                lines.fail(f"joints nested at most {MAX_DEPTH} deep", f"a deeper {block.what}")
+            stack.append(_open_joint(lines, tokens, block.index, joints))
+        elif word == "END" and len(tokens) > 1 and tokens[1].upper() == "SITE":
+            block.ends.append(_read_end_site(lines, tokens, block.what))
+        elif tokens == ["}"]:
+            stack.pop()
+            joints[block.index] = BvhJoint(
+                block.name, block.parent, block.offset, block.channels, tuple(block.ends),
+                block.start,
+            )  # fmt: skip
+        else:
+            lines.fail(closing, _show(" ".join(tokens)))
+
+
+def _open_joint(lines: _Lines, tokens: list[str], parent: int, joints: list[BvhJoint]) -> _Open:
+    """Read a block's header, brace, OFFSET and CHANNELS; append its joint (ends to come)."""
     keyword = tokens[0].upper()
     name, opened = _header(lines, tokens, keyword)
     start = lines.line
@@ -127,22 +170,8 @@ def _read_joint(lines: _Lines, tokens: list[str], parent: int, joints: list[BvhJ
     _open_brace(lines, opened, what)
     offset = _read_offset(lines, what)
     channels = _read_channels(lines, what)
-    index = len(joints)
     joints.append(BvhJoint(name, parent, offset, channels, (), start))
-    ends: list[np.ndarray] = []
-    closing = f"'JOINT', 'End Site' or '}}' closing {what} (line {start})"
-    while True:
-        tokens = lines.next(closing)
-        word = tokens[0].upper()
-        if word == "JOINT":
-            _read_joint(lines, tokens, index, joints)
-        elif word == "END" and len(tokens) > 1 and tokens[1].upper() == "SITE":
-            ends.append(_read_end_site(lines, tokens, what))
-        elif tokens == ["}"]:
-            break
-        else:
-            lines.fail(closing, _show(" ".join(tokens)))
-    joints[index] = BvhJoint(name, parent, offset, channels, tuple(ends), start)
+    return _Open(len(joints) - 1, name, parent, offset, channels, start, what)
 
 
 def _read_end_site(lines: _Lines, tokens: list[str], owner: str) -> np.ndarray:
@@ -173,6 +202,8 @@ def _read_channels(lines: _Lines, what: str) -> tuple[str, ...]:
             "a channel count after CHANNELS", _show(tokens[1]) if len(tokens) > 1 else "none"
         )
     count, names = int(tokens[1]), tokens[2:]
+    if count > len(CHANNEL_NAMES):
+        lines.fail(f"at most {len(CHANNEL_NAMES)} channels", _show(tokens[1]))
     if count != len(names):
         lines.fail(f"{count} channel names after 'CHANNELS {count}'", f"{len(names)}")
     channels: list[str] = []
@@ -194,6 +225,8 @@ def _number(lines: _Lines, token: str) -> float:
         lines.fail("a number", _show(token))
     if not math.isfinite(value):
         lines.fail("a finite number", _show(token))
+    if abs(value) > LARGEST:
+        lines.fail(f"a number of magnitude at most {LARGEST:g}", _show(token))
     return value
 
 
@@ -217,6 +250,10 @@ def _read_frame_time(lines: _Lines) -> float:
 
 def _read_frames(lines: _Lines, nframes: int, frames_line: int, nchannels: int) -> np.ndarray:
     """``nframes`` lines of ``nchannels`` finite numbers each, then the end of the file."""
+    left = len(lines.lines) - lines.index  # frames are read by what is there, not declared
+    if nframes > left:
+        expected = f"as many frame lines as 'Frames:' says ({_show(str(nframes))})"
+        lines.fail(expected, f"at most {left}", line=frames_line)
     frames = np.zeros((nframes, nchannels))
     for f in range(nframes):
         tokens = lines.peek()
@@ -230,9 +267,9 @@ def _read_frames(lines: _Lines, nframes: int, frames_line: int, nchannels: int) 
             frames[f] = np.array(tokens, dtype=float)
         except ValueError:
             frames[f] = [_number(lines, t) for t in tokens]
-        if not np.all(np.isfinite(frames[f])):
-            bad = next(t for t, v in zip(tokens, frames[f], strict=True) if not math.isfinite(v))
-            lines.fail("a finite number", _show(bad))
+        if not np.all(np.abs(frames[f]) <= LARGEST):  # NaN fails too
+            bad = next(t for t, v in zip(tokens, frames[f], strict=True) if not abs(v) <= LARGEST)
+            _number(lines, bad)
     if lines.peek() is not None:
         lines.next("")
         lines.fail(f"the end of the file after {nframes} frames (Frames: {nframes})", "more lines")

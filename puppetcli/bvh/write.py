@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from puppetcli.bvh.model import ORDERS, euler_from_quat, unwrap_euler
+from puppetcli.errors import shown
 from puppetcli.outputs import write_text_atomic
 from puppetcli.rig.skeleton import Skeleton
 from puppetcli.run.keyframes import BonePose, Keyframe
@@ -65,7 +66,7 @@ def write_keys_bvh(
     ``fps`` between the keys' times.
     """
     if interpolate not in (None, "slerp"):
-        raise ValueError(f"interpolate must be None or 'slerp', got {interpolate!r}")
+        raise ValueError(f"interpolate must be None or 'slerp', got {shown(interpolate)}")
     keys = list(keys)  # a KeyframeSet or any iterable of keys in time order
     if interpolate == "slerp":
         keys = resample_keys(keys, fps)
@@ -78,11 +79,11 @@ def bvh_text(
     """The whole BVH file: hierarchy, then one frame line per key."""
     order = order.upper()
     if order not in ORDERS:
-        raise ValueError(f"order must be one of {', '.join(ORDERS)}, got {order!r}")
+        raise ValueError(f"order must be one of {', '.join(ORDERS)}, got {shown(order)}")
     if not (math.isfinite(scale) and scale > 0.0):
-        raise ValueError(f"scale must be positive and finite, got {scale!r}")
+        raise ValueError(f"scale must be positive and finite, got {shown(scale)}")
     if not (math.isfinite(frame_time) and frame_time > 0.0):
-        raise ValueError(f"frame time must be positive and finite, got {frame_time!r}")
+        raise ValueError(f"frame time must be positive and finite, got {shown(frame_time)}")
     bones = _depth_first(skel.parents)
     lines = ["HIERARCHY"]
     _joint_lines(skel, bones[0], order, scale, bvh_names(skel.names), lines, 0)
@@ -195,7 +196,7 @@ def resample_keys(keys: Sequence[Keyframe], fps: float) -> list[Keyframe]:
     """Keys at t0 + k/fps for every k with t0 + k/fps ≤ t_last (t0 = the first key's time),
     interpolated between the keys around each time (see ``interpolate_keys``)."""
     if not (math.isfinite(fps) and fps > 0.0):
-        raise ValueError(f"fps must be positive and finite, got {fps!r}")
+        raise ValueError(f"fps must be positive and finite, got {shown(fps)}")
     keys = sorted(keys, key=lambda k: k.time)
     if not keys:
         return []

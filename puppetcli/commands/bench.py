@@ -17,6 +17,7 @@ from puppetcli.bench.solvers import (
     peer_summary,
     stage_table,
 )
+from puppetcli.commands.options import STEP, Number
 from puppetcli.outputs import write_text_atomic
 
 SOLVER_CHOICES = [*SOLVERS, "reference"]
@@ -26,7 +27,7 @@ SOLVER_CHOICES = [*SOLVERS, "reference"]
 @click.option(
     "--h",
     "steps_h",
-    type=float,
+    type=STEP,
     multiple=True,
     default=(0.001, 0.02),
     show_default=True,
@@ -54,7 +55,7 @@ SOLVER_CHOICES = [*SOLVERS, "reference"]
 )
 @click.option(
     "--seconds",
-    type=click.FloatRange(min=0.0, min_open=True),
+    type=Number(1e-3, 3600.0),
     default=0.5,
     show_default=True,
     help="Simulated time of the lift per run (runs repeat until enough steps are timed; "

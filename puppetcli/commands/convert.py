@@ -11,18 +11,25 @@ from pathlib import Path
 import click
 
 from puppetcli.bvh.write import FrameSampler, write_keys_bvh
-from puppetcli.commands.options import ENGINE_OPTION, force_option, order_option, scale_option
+from puppetcli.commands.options import (
+    ENGINE_OPTION,
+    RATE,
+    YES_OPTION,
+    force_option,
+    order_option,
+    scale_option,
+)
 from puppetcli.errors import ScriptError
 from puppetcli.mcap.replay import load_replay
 from puppetcli.outputs import make_parent, refuse_overwrite
 from puppetcli.rig.load import load_rig
 from puppetcli.rig.skeleton import Skeleton
+from puppetcli.run.budget import check_budget, run_length, simulation_cost
 from puppetcli.run.runner import Runner, script_model
 from puppetcli.run.warmup import prepare_engine
 from puppetcli.script.load import load_script
-from solver.model import Model, build_model
+from solver.model import build_model
 
-MAX_STEPS = 10_000_000  # as `pose`: a run longer than this is a mistake in the script
 KEYS_FPS = 30.0  # Frame Time of a BVH of keys when no --fps is given
 
 
@@ -37,13 +44,14 @@ KEYS_FPS = 30.0  # Frame Time of a BVH of keys when no --fps is given
     type=click.Path(exists=True, dir_okay=False, path_type=Path), help="The rig to pose.",
 )  # fmt: skip
 @click.option(
-    "--fps", type=click.FloatRange(min=0.0, min_open=True), default=None,
+    "--fps", type=RATE, default=None,
     help="Write the whole motion sampled at this rate [default: one frame per key, at 30 fps].",
 )  # fmt: skip
 @order_option("every joint")
 @scale_option("File units per metre (100 for centimetres).")
 @force_option("OUT.bvh if it exists")
 @ENGINE_OPTION
+@YES_OPTION
 def command(
     source: Path,
     out: Path,
@@ -53,6 +61,7 @@ def command(
     scale: float,
     force: bool,
     engine: str,
+    yes: bool,
 ) -> None:
     """Run the manipulation script SOURCE (.yaml), or replay the recorded session SOURCE
     (.mcap, see docs/sessions.md), on RIG and write its motion as BVH.
@@ -68,16 +77,14 @@ def command(
         click.echo(f"warning: {replay.warning}", err=True)
     plan = replay.script if replay is not None else load_script(source, spec)
     model = script_model(build_model(spec), plan)
-    if _total_steps(model, plan) > MAX_STEPS:
-        raise ScriptError(
-            f"{source}: expected at most {MAX_STEPS:,} steps, got {_total_steps(model, plan):,} "
-            f"(duration over step h = {model.options.h:g} s)"
-        )
+    steps = run_length(plan) / model.options.h
+    what = f"{steps:,.0f} steps of h = {model.options.h:g} s, {len(spec.bones)} bones"
+    check_budget(source, what, simulation_cost(steps, len(spec.bones)), yes)
     model, upgrade = prepare_engine(model, engine, rig)
     runner = replay.runner(model) if replay is not None else Runner(model, plan)
     runner.upgrade = upgrade
     sampler = FrameSampler(model, fps, runner.state) if fps is not None else None
-    with _progress(_total_steps(model, plan)) as tick:
+    with _progress(round(steps)) as tick:
         runner.on_step, runner.progress = sampler, tick
         result = runner.run()
     frames = sampler.frames if sampler is not None else list(result.keys)
@@ -89,11 +96,6 @@ def command(
     click.echo(f"wrote {out}: {what}, {result.state.time:.3f} s simulated, order {order.upper()}")
     if result.error is not None:
         raise result.error
-
-
-def _total_steps(model: Model, plan) -> int:
-    timeline = sum(getattr(a, "duration", 0.0) for a in plan.actions)
-    return round(max(plan.duration or 0.0, timeline) / model.options.h)
 
 
 @contextlib.contextmanager

@@ -16,14 +16,15 @@ from pathlib import Path
 import click
 import numpy as np
 
-from puppetcli.commands.options import force_option, step_option, view_option
+from puppetcli.commands.options import Number, force_option, step_option, view_option
+from puppetcli.errors import shown
 from puppetcli.live.recording import POINTER_RADIUS, LiveRecording
 from puppetcli.live.scene import scene_bounds, scene_description
 from puppetcli.live.server import FRAME_HZ, LOOPBACK, LiveServer, Outcome
 from puppetcli.mcap.record import FIT_FRACTION, device_reach, fit_workspace
 from puppetcli.mcap.session import METADATA_NAME, Workspace
-from puppetcli.outputs import OutputError, prepare_outdir, refuse_overwrite
-from puppetcli.render.camera import parse_view
+from puppetcli.outputs import prepare_outdir, refuse_overwrite
+from puppetcli.render.camera import View
 from puppetcli.rig.load import load_rig
 from puppetcli.run.outputs import KEY_OUTPUTS, write_key_outputs
 from puppetcli.run.warmup import warm_up
@@ -36,7 +37,7 @@ from solver.spec import RigSpec
 
 DEFAULT_DEVICE = "SpidarG6X3R"
 MARGIN = 0.3  # m of workspace around the rig at rest
-STEP_RANGE = (1e-4, 0.05)  # s: --h outside this is a mistake (or not real time)
+REAL_TIME_STEPS = (1e-4, 0.05)  # s: --h outside this is a mistake (or not real time)
 
 
 @click.command("live")
@@ -60,7 +61,7 @@ STEP_RANGE = (1e-4, 0.05)  # s: --h outside this is a mistake (or not real time)
     help="Address to listen on; anything but loopback lets other machines in.",
 )
 @click.option("--no-open", is_flag=True, help="Do not open the page in a browser.")
-@step_option("the rig's", click.FloatRange(*STEP_RANGE))
+@step_option("the rig's", Number(*REAL_TIME_STEPS))
 @click.option(
     "--device",
     default=DEFAULT_DEVICE,
@@ -71,7 +72,7 @@ STEP_RANGE = (1e-4, 0.05)  # s: --h outside this is a mistake (or not real time)
 @force_option("the session and its outputs")
 def command(
     rig: Path, session: Path | None, port: int, host: str, no_open: bool, step: float | None,
-    device: str, view: str, force: bool,
+    device: str, view: View, force: bool,
 ) -> None:  # fmt: skip
     """Pose the doll on RIG by hand in the browser, recorded as a session.
 
@@ -84,10 +85,11 @@ def command(
     """
     session = session or Path(time.strftime("live-%Y%m%d-%H%M%S.mcap"))
     if session.suffix.lower() != ".mcap":
-        raise OutputError(f"{session}: expected a session file name ending in .mcap, got "
-                          f"'{session.suffix}'")  # fmt: skip
+        expected = "a session file name ending in .mcap"
+        raise click.BadParameter(
+            f"expected {expected}, got {shown(session.name)}", param_hint="'-o'"
+        )
     refuse_overwrite(session, force)
-    parse_view(view)
     spec = load_rig(rig)
     dev = preset_from_option(device)
     outdir = session.with_suffix("")
@@ -127,7 +129,7 @@ class _Run:
     workspace: Workspace
     start: np.ndarray
     step: float | None
-    view: str
+    view: View
     live: LiveRecording | None = None
 
     def begin(self) -> LiveRecording:

@@ -11,6 +11,8 @@ import click
 
 from puppetcli.commands.options import (
     ENGINE_OPTION,
+    RATE,
+    YES_OPTION,
     force_option,
     order_option,
     scale_option,
@@ -20,7 +22,9 @@ from puppetcli.commands.options import (
 from puppetcli.errors import ScriptError
 from puppetcli.mcap.replay import Replay, load_replay
 from puppetcli.outputs import prepare_outdir
+from puppetcli.render.camera import View
 from puppetcli.rig.load import load_rig
+from puppetcli.run.budget import check_budget, run_length, simulation_cost
 from puppetcli.run.outputs import write_key_outputs
 from puppetcli.run.runner import Runner, RunResult, script_model
 from puppetcli.run.trace import RunTrace
@@ -29,7 +33,6 @@ from puppetcli.script.load import load_script
 from solver.model import build_model
 
 OUTPUTS = ["keyframes.json", "keyframes.bvh", "trace.mcap", "sheet.png", "keys"]
-MAX_STEPS = 10_000_000  # a run longer than this is a mistake in the script (h or a duration)
 
 
 @click.command("pose")
@@ -58,7 +61,7 @@ MAX_STEPS = 10_000_000  # a run longer than this is a mistake in the script (h o
 @order_option("keyframes.bvh")
 @click.option(
     "--fps",
-    type=click.FloatRange(min=0.0, min_open=True),
+    type=RATE,
     default=30.0,
     show_default=True,
     help="Frame Time of keyframes.bvh is 1/fps (one frame per key).",
@@ -73,6 +76,7 @@ MAX_STEPS = 10_000_000  # a run longer than this is a mistake in the script (h o
 @scale_option("keyframes.bvh: length unit factor (100 = centimetres).")
 @view_option("the pictures")
 @ENGINE_OPTION
+@YES_OPTION
 def command(
     rig: Path,
     script: Path,
@@ -86,8 +90,9 @@ def command(
     fps: float,
     interpolate: str,
     scale: float,
-    view: str,
+    view: View,
     engine: str,
+    yes: bool,
 ) -> None:
     """Run a manipulation script (or replay a session .mcap) on a rig: keyframes, BVH, a
     trace and pictures.
@@ -107,7 +112,10 @@ def command(
     model = script_model(build_model(spec), plan)
     if step is not None:
         model = model.with_options(h=step)
-    _check_length(script, plan, model.options.h)
+    steps = run_length(plan) / model.options.h
+    traced = 0.0 if no_trace else steps / trace_every
+    what = f"{steps:,.0f} steps of h = {model.options.h:g} s, {len(spec.bones)} bones"
+    check_budget(script, what, simulation_cost(steps, len(spec.bones), traced), yes)
     skipped = {"trace.mcap"} if no_trace else set()
     skipped |= {"sheet.png", "keys"} if no_render else set()
     prepare_outdir(outdir, [name for name in OUTPUTS if name not in skipped], force)
@@ -130,19 +138,10 @@ def command(
         )
 
 
-def _check_length(script: Path, plan, h: float) -> None:
-    steps = max(plan.duration or 0.0, _timeline_length(plan)) / h
-    if steps > MAX_STEPS:
-        raise ScriptError(
-            f"{script}: expected at most {MAX_STEPS:,} steps, got {steps:,.0f} "
-            f"(duration over step h = {h:g} s)"
-        )
-
-
 def _run(
     model, plan, outdir: Path, trace_every: int, no_trace: bool, replay: Replay | None, upgrade
 ) -> RunResult:
-    total = max(plan.duration or 0.0, _timeline_length(plan))
+    total = run_length(plan)
     with _progress(round(total / model.options.h)) as tick:
         if replay is not None:
             runner = replay.runner(model, progress=tick)
@@ -165,10 +164,6 @@ def _progress(steps: int):
         return
     with click.progressbar(length=max(1, steps), label="simulating", file=sys.stderr) as bar:
         yield bar.update
-
-
-def _timeline_length(plan) -> float:
-    return sum(getattr(a, "duration", 0.0) for a in plan.actions)
 
 
 def _report(result: RunResult, h: float) -> None:

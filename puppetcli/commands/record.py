@@ -6,14 +6,17 @@ from pathlib import Path
 
 import click
 
-from puppetcli.commands.options import force_option
-from puppetcli.errors import SessionError
+from puppetcli.commands.options import YES_OPTION, Number, force_option
+from puppetcli.errors import shown
 from puppetcli.mcap.record import record_session
-from puppetcli.mcap.session import write_session
+from puppetcli.mcap.session import TICK, write_session
 from puppetcli.outputs import make_parent, refuse_overwrite
 from puppetcli.rig.load import load_rig
+from puppetcli.run.budget import SECONDS_PER_TICK, check_budget, run_length, simulation_cost
+from puppetcli.run.runner import script_model
 from puppetcli.script.load import load_script
 from puppetcli.spidar import preset_from_option
+from solver.model import build_model
 
 DEFAULT_DEVICE = "SpidarG6X3R"
 
@@ -31,15 +34,22 @@ DEFAULT_DEVICE = "SpidarG6X3R"
     "HISpidarG6X) or a preset YAML file.",
 )  # fmt: skip
 @click.option(
-    "--noise", type=click.FloatRange(min=0.0), default=0.0, show_default=True,
+    "--noise", type=Number(0.0, 1e6), default=0.0, show_default=True,
     help="Standard deviation of Gaussian noise added to every encoder count (counts).",
 )  # fmt: skip
-@click.option("--seed", type=int, default=0, show_default=True, help="Seed of the count noise.")
+@click.option(
+    "--seed",
+    type=click.IntRange(0, 2**63 - 1),
+    default=0,
+    show_default=True,
+    help="Seed of the count noise.",
+)
 @click.option("--with-pose", is_flag=True, help="Also store the true grip pose (/spidar/pose).")
 @force_option("SESSION.mcap if it exists")
+@YES_OPTION
 def command(
     rig: Path, script: Path, out: Path, device: str, noise: float, seed: int, with_pose: bool,
-    force: bool,
+    force: bool, yes: bool,
 ) -> None:  # fmt: skip
     """Turn the manipulation script SCRIPT into the session a SPIDAR-G device would record.
 
@@ -50,12 +60,16 @@ def command(
     SESSION.mcap`.  The format is described in docs/sessions.md.
     """
     if out.suffix.lower() != ".mcap":
-        raise SessionError(
-            f"{out}: expected a session file name ending in .mcap, got '{out.suffix}'"
-        )
+        expected = "a session file name ending in .mcap"
+        raise click.BadParameter(f"expected {expected}, got {shown(out.name)}", param_hint="'-o'")
     refuse_overwrite(out, force)
     spec = load_rig(rig)
     plan = load_script(script, spec)
+    h = script_model(build_model(spec), plan).options.h
+    ticks, bones = run_length(plan) / TICK, len(spec.bones)
+    what = f"{ticks:,.0f} device ticks of {TICK * 1e3:g} ms, steps of h = {h:g} s, {bones} bones"
+    seconds = simulation_cost(ticks * TICK / h, bones) + ticks * SECONDS_PER_TICK
+    check_budget(script, what, seconds, yes)
     session = record_session(
         spec, plan, preset_from_option(device), noise, seed, store_pose=with_pose
     )

@@ -9,11 +9,12 @@ from pathlib import Path
 
 import click
 
-from puppetcli.commands.options import force_option, view_option
-from puppetcli.mcap.replay import replay_traced
+from puppetcli.commands.options import SIZE, YES_OPTION, Number, force_option, view_option
+from puppetcli.errors import shown
+from puppetcli.mcap.replay import load_replay, replay_traced
 from puppetcli.mcap.session import is_session
 from puppetcli.outputs import make_parent, refuse_overwrite
-from puppetcli.render.camera import RenderError, parse_size, parse_view
+from puppetcli.render.camera import RenderError, View
 from puppetcli.render.inputs import input_kind, key_poses, trace_poses
 from puppetcli.render.picture import (
     contact_sheet,
@@ -22,12 +23,23 @@ from puppetcli.render.picture import (
     render_pose,
     write_png,
 )
+from puppetcli.render.video import CODECS, frame_count
 from puppetcli.rig.load import load_rig
 from puppetcli.rig.skeleton import Skeleton
+from puppetcli.run.budget import (
+    check_budget,
+    run_length,
+    simulation_cost,
+    video_cost,
+)
+from puppetcli.run.runner import script_model
+from solver.model import build_model
 
 
 @click.command("render")
-@click.argument("input_path", metavar="INPUT", type=click.Path(dir_okay=False, path_type=Path))
+@click.argument(
+    "input_path", metavar="INPUT", type=click.Path(exists=True, dir_okay=False, path_type=Path)
+)
 @click.option(
     "-o",
     "--out",
@@ -37,29 +49,40 @@ from puppetcli.rig.skeleton import Skeleton
 )
 @click.option(
     "--rig",
-    type=click.Path(dir_okay=False, path_type=Path),
+    required=True,
+    type=click.Path(exists=True, dir_okay=False, path_type=Path),
     help="Rig file of the poses (bone shapes, props, ground). Required.",
 )
-@click.option("--cols", type=int, help="Columns of the sheet [default: up to 4, then ~square].")
+@click.option(
+    "--cols",
+    type=click.IntRange(1, 100),
+    help="Columns of the sheet [default: up to 4, then ~square].",
+)
 @view_option("the pictures (front from +z, side from +x, top from +y)")
-@click.option("--size", default="480x480", show_default=True, help="Panel size WIDTHxHEIGHT, px.")
+@click.option(
+    "--size", type=SIZE, default="480x480", show_default=True, help="Panel size WIDTHxHEIGHT, px."
+)
 @click.option(
     "--video",
     type=click.Path(dir_okay=False, path_type=Path),
     help="With a trace or session .mcap INPUT: a video of every step (.mp4 mp4v or .avi MJPG).",
 )
-@click.option("--fps", type=float, default=30.0, show_default=True, help="Video frame rate.")
+@click.option(
+    "--fps", type=Number(1.0, 240.0), default=30.0, show_default=True, help="Video frame rate."
+)
 @force_option("existing output files")
+@YES_OPTION
 def command(
     input_path: Path,
     sheet: Path | None,
-    rig: Path | None,
+    rig: Path,
     cols: int | None,
-    view: str,
-    size: str,
+    view: View,
+    size: tuple[int, int],
     video: Path | None,
     fps: float,
     force: bool,
+    yes: bool,
 ) -> None:
     """Draw poses: a contact sheet of keys, or a video of a trace.
 
@@ -69,12 +92,12 @@ def command(
     one perspective camera fitted to all poses, so they compare directly.
     Existing outputs are kept unless --force.
     """
-    camera_view, panel = parse_view(view), parse_size(size)
-    kind = _check_request(input_path, sheet, rig, cols, video, fps, force)
+    camera_view, panel = view, size
+    kind = _check_request(input_path, sheet, video, force)
     spec = load_rig(rig)
     skel = Skeleton.from_spec(spec)
     if kind == "trace" and is_session(input_path):
-        steps, poses = _session_poses(input_path, spec, skel)
+        steps, poses = _session_poses(input_path, spec, skel, yes)
     elif kind == "trace":
         steps, poses = trace_poses(input_path, skel)
     else:
@@ -88,54 +111,66 @@ def command(
         click.echo(f"{sheet}: {len(poses)} panels, {min(ncols, len(poses))} × {rows}, "
                    f"{camera_view.name} view, {panel[0]}x{panel[1]} px each")  # fmt: skip
     if video is not None:
+        frames = frame_count([p.time for p in steps], fps)
+        what = f"{frames:,} video frames at {fps:g} fps"
+        check_budget(input_path, what, video_cost(frames, panel), yes)
         _video(video, skel, steps, spec, frame_poses(skel, steps, spec, camera_view, panel), fps)
 
 
 def _check_request(
     input_path: Path,
     sheet: Path | None,
-    rig: Path | None,
-    cols: int | None,
     video: Path | None,
-    fps: float,
     force: bool,
 ) -> str:
-    """Every option checked before any file is read; returns the input kind."""
-    kind = input_kind(input_path)
+    """Every option checked before any file is read (a mistake is a usage error, status 2);
+    returns the input kind."""
+    try:
+        kind = input_kind(input_path)
+    except RenderError as exc:
+        raise click.BadParameter(str(exc), param_hint="'INPUT'") from None
     if sheet is None and video is None:
-        raise RenderError("nothing to write: give -o SHEET.png and/or --video OUT.mp4")
-    if rig is None:
-        raise RenderError(f"{input_path}: --rig RIG is required (it gives the bones' shapes)")
+        raise click.UsageError("nothing to write: give -o SHEET.png and/or --video OUT.mp4")
     if sheet is not None and sheet.suffix.lower() != ".png":
-        raise RenderError(f"-o: expected a .png file name, got {sheet.name!r}")
-    if cols is not None and cols < 1:
-        raise RenderError(f"--cols: expected a positive number of columns, got {cols}")
+        raise click.BadParameter(
+            f"expected a .png file name, got {shown(sheet.name)}", param_hint="'-o'"
+        )
     if video is not None and kind != "trace":
-        raise RenderError(f"--video: expected a trace .mcap INPUT, got {input_path.name!r}")
-    if not 1.0 <= fps <= 240.0:
-        raise RenderError(f"--fps: expected 1 … 240 frames per second, got {fps:g}")
+        raise click.BadParameter(
+            f"expected a trace or session .mcap INPUT, got {shown(input_path.name)}",
+            param_hint="'--video'",
+        )
+    if video is not None and video.suffix.lower() not in CODECS:
+        raise click.BadParameter(
+            f"expected an .mp4 or .avi file name, got {shown(video.name)}", param_hint="'--video'"
+        )
     for out in (sheet, video):
         if out is not None:
             refuse_overwrite(out, force)
     return kind
 
 
-def _session_poses(path: Path, spec, skel: Skeleton):
+def _session_poses(path: Path, spec, skel: Skeleton, yes: bool):
     """(every step, the keys) of a recorded session, replayed into a trace first."""
+    replay = load_replay(path, spec)
+    if replay.warning:
+        click.echo(f"warning: {replay.warning}", err=True)
+    h = script_model(build_model(spec), replay.script).options.h
+    steps = run_length(replay.script) / h
+    what = f"{steps:,.0f} steps of h = {h:g} s, {len(spec.bones)} bones"
+    check_budget(path, what, simulation_cost(steps, len(spec.bones), steps), yes)
     with tempfile.TemporaryDirectory() as tmp:
-        replay, result = replay_traced(path, spec, Path(tmp) / "trace.mcap")
-        if replay.warning:
-            click.echo(f"warning: {replay.warning}", err=True)
+        result = replay_traced(replay, spec, Path(tmp) / "trace.mcap")
         if result.error is not None:
             raise result.error
         return trace_poses(Path(tmp) / "trace.mcap", skel)
 
 
 def _video(path: Path, skel, steps, spec, framing, fps: float) -> None:
-    from puppetcli.render.video import frame_indices, write_video
+    from puppetcli.render.video import write_video
 
     make_parent(path)
-    total = len(frame_indices([p.time for p in steps], fps))
+    total = frame_count([p.time for p in steps], fps)
     with _progress(total) as tick:
         n = write_video(path, skel, steps, spec, framing, fps, tick)
     click.echo(f"{path}: {n} frames at {fps:g} fps ({len(steps)} recorded steps)")

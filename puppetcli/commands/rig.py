@@ -8,7 +8,7 @@ import click
 
 from puppetcli.bvh.read import read_bvh
 from puppetcli.bvh.rig import auto_scale, check_frame, describe_scale, rig_text_from_bvh
-from puppetcli.commands.options import force_option
+from puppetcli.commands.options import SCALE, force_option
 from puppetcli.outputs import refuse_overwrite, write_text_atomic
 from puppetcli.rig.load import rig_from_text
 from solver.model import build_model
@@ -37,7 +37,7 @@ def command() -> None:
 )
 @click.option(
     "--scale",
-    type=click.FloatRange(min=0.0, min_open=True),
+    type=SCALE,
     default=None,
     help="Metres per file unit [default: 0.01 if the skeleton is taller than 10 units, else 1].",
 )

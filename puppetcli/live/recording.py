@@ -119,7 +119,7 @@ class LiveRecording:
         self.filter = PointerFilter(*self.target)
         self.jumping = False
         self._tick(0)
-        script = session_script(session, self.track)
+        script = session_script(session, self.track, spec)
         self.model: Model = script_model(build_model(spec), script)
         self.tap = _Tap(self.writer)
         self.runner = SessionRunner(self.model, Replay(session, script, self.track), trace=self.tap)

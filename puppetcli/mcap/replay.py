@@ -23,17 +23,19 @@ Multi-rate coupling, physics step h (any multiple of the tick or not):
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import json
+from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from puppetcli.errors import ScriptError, SessionError
+from puppetcli.errors import ScriptError, SessionError, shown
 from puppetcli.mcap.session import Event, Session, read_session
 from puppetcli.run.runner import Runner, TouchMode, UndoKey, Until, script_model
 from puppetcli.run.trace import RunTrace
 from puppetcli.script.actions import GRIP_DEFAULTS, Expect, Grip, Release, frozen_vector
-from puppetcli.script.load import Key, Push, Script
+from puppetcli.script.load import Key, Push, Script, script_from_text
 from puppetcli.spidar import (
     DeviceError,
     PoseEstimator,
@@ -43,7 +45,7 @@ from puppetcli.spidar import (
     lengths_from_counts,
 )
 from puppetcli.spidar.strings import MIN_LENGTH
-from puppetcli.yamldoc import did_you_mean
+from puppetcli.yamldoc import LARGEST, did_you_mean
 from solver import quat, quat1
 from solver.model import Model, build_model
 from solver.spec import RigSpec
@@ -157,34 +159,43 @@ def _check_reach(session: Session, topic: str, t, pos: np.ndarray, q: np.ndarray
 # --- settings and events ------------------------------------------------------------------
 
 
-def session_script(session: Session, track: DeviceTrack) -> Script:
-    """A Script carrying the session's run settings (its actions come from ``actions``)."""
+def session_script(session: Session, track: DeviceTrack, spec: RigSpec) -> Script:
+    """A Script carrying the session's run settings (its actions come from ``actions``), read
+    by the script reader itself: the same keys, ranges and error words as a script's."""
     s = session.settings
     where = f"{session.source}: metadata.settings"
+    pointer = s.get("pointer") or {} if isinstance(s, dict) else None
+    if not isinstance(pointer, dict) or not isinstance(pointer.get("active", True), bool):
+        expected = 'a JSON object whose "pointer" holds "radius" and "active" (true or false)'
+        raise SessionError(f"{where}: expected {expected}, got {shown(s)}")
+    doc: dict[str, Any] = {"actions": []}
+    for key in ("h", "gravity", "solver", "haptics"):
+        if s.get(key) is not None:
+            doc[key] = s[key]
+    if pointer.get("radius") is not None:
+        doc["pointer"] = {"radius": pointer["radius"]}
     try:
-        solver = dict(s.get("solver") or {})
-        if set(solver) - set(SOLVER_KEYS):
-            raise ValueError(f"unknown solver keys {sorted(set(solver) - set(SOLVER_KEYS))}")
-        h = s.get("h")
-        if h is not None and not (isinstance(h, int | float) and h > 0):
-            raise ValueError(f"h = {h!r}")
-        pointer, haptics = dict(s.get("pointer") or {}), dict(s.get("haptics") or {})
-        duration = max(float(s.get("duration") or 0.0), session.end_time)
-        return Script(
-            source=session.source, h=h, duration=duration or None,
-            gravity=bool(s.get("gravity", True)), solver=solver, actions=(),
-            pointer_start=frozen_vector(track.world_pos[0]),
-            pointer_radius=float(pointer.get("radius", 0.02)),
-            workspace_offset=frozen_vector(session.workspace.offset),
-            workspace_scale=session.workspace.scale,
-            max_force=float(haptics.get("max_force", 20.0)),
-            max_torque=float(haptics.get("max_torque", 1.0)),
-            lowpass=float(haptics.get("lowpass", 0.0)),
-        )  # fmt: skip
-    except (TypeError, ValueError, AttributeError) as exc:
+        text = json.dumps(doc, allow_nan=False)
+        script = script_from_text(text, where, spec)
+        duration = s.get("duration") or 0.0
+        duration = max(_setting_number(where, "duration", duration), session.end_time)
+    except (TypeError, ValueError, RecursionError, ScriptError) as exc:
         raise SessionError(
-            f"{where}: expected the run settings of docs/sessions.md, got {exc}"
+            f"{where}: expected the run settings of docs/sessions.md, got {shown(str(exc))}"
         ) from None
+    return replace(
+        script, duration=duration or None, pointer_start=frozen_vector(track.world_pos[0]),
+        workspace_offset=frozen_vector(session.workspace.offset),
+        workspace_scale=session.workspace.scale,
+    )  # fmt: skip
+
+
+def _setting_number(where: str, key: str, value: object) -> float:
+    if not isinstance(value, int | float) or isinstance(value, bool) or not 0 <= value <= LARGEST:
+        raise SessionError(
+            f"{where}: {key}: expected a number in [0, {LARGEST:g}], got {shown(value)}"
+        )
+    return float(value)
 
 
 def _name(event: Event, session: Session, key: str, known: list[str]) -> str:
@@ -192,7 +203,7 @@ def _name(event: Event, session: Session, key: str, known: list[str]) -> str:
     if name not in known:
         raise SessionError(
             f"{session.source}: {event.topic}[{event.index}]: {key}: expected a {key} of the rig, "
-            f"got {name!r}{did_you_mean(str(name), known)}"
+            f"got {shown(name)}{did_you_mean(str(name), known)}"
         )
     return name
 
@@ -309,18 +320,17 @@ def load_replay(path: Path, spec: RigSpec) -> Replay:
     """Read, check and estimate a session for the rig (``SessionError`` on any problem)."""
     session = read_session(path)
     track = estimate_track(session)
-    return Replay(session, session_script(session, track), track)
+    return Replay(session, session_script(session, track, spec), track)
 
 
-def replay_traced(path: Path, spec: RigSpec, trace_path: Path):
-    """Replay the session at ``path`` on the rig, tracing every step (and the device's
-    channels) into ``trace_path``: (the Replay, the run's ``RunResult``)."""
-    replay = load_replay(path, spec)
+def replay_traced(replay: Replay, spec: RigSpec, trace_path: Path):
+    """Run a loaded session on the rig, tracing every step (and the device's channels) into
+    ``trace_path``: the run's ``RunResult``."""
     model = script_model(build_model(spec), replay.script)
     runner = replay.runner(model)
     with RunTrace(trace_path, model, replay.script, 1, runner.pointer_on, spidar=True) as trace:
         runner.trace = trace
-        return replay, runner.run()
+        return runner.run()
 
 
 class SessionRunner(Runner):

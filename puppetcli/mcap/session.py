@@ -31,11 +31,12 @@ from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
 from zstandard import ZstdError
 
-from puppetcli.errors import SessionError
+from puppetcli.errors import SessionError, shown
 from puppetcli.jsontext import json_bytes
 from puppetcli.mcap.trace import library_name, load_schema
 from puppetcli.outputs import atomic_path
 from puppetcli.spidar import DeviceError, DevicePreset, preset, preset_from_text, preset_to_yaml
+from puppetcli.yamldoc import LARGEST, SMALLEST
 from solver import quat
 
 __all__ = [
@@ -376,8 +377,10 @@ def _meta_json(path: Path, meta: dict[str, str], key: str, default: Any) -> Any:
         return default
     try:
         return json.loads(meta[key])
-    except ValueError as exc:
-        raise SessionError(f"{path}: metadata.{key}: expected JSON, got {meta[key]!r}") from exc
+    except (ValueError, RecursionError) as exc:
+        raise SessionError(
+            f"{path}: metadata.{key}: expected JSON, got {shown(meta[key])}"
+        ) from exc
 
 
 def _device(path: Path, meta: dict[str, str]) -> DevicePreset:
@@ -400,13 +403,14 @@ def _workspace(path: Path, meta: dict[str, str]) -> Workspace:
     except (TypeError, KeyError, ValueError) as exc:
         raise SessionError(
             f"{path}: metadata.workspace: expected {{offset: [x, y, z], scale: s, "
-            f"orientation: [w, x, y, z]}}, got {meta['workspace']!r}"
+            f"orientation: [w, x, y, z]}}, got {shown(meta['workspace'])}"
         ) from exc
-    norm = float(np.linalg.norm(orientation))
-    if not (np.all(np.isfinite(offset)) and np.isfinite(scale) and scale > 0 and norm > 0.5):
+    finite = np.all(np.abs(offset) <= LARGEST) and SMALLEST <= scale <= LARGEST
+    norm = float(np.linalg.norm(orientation)) if np.all(np.abs(orientation) <= 2.0) else 0.0
+    if not (finite and 0.5 < norm < 2.0):
         raise SessionError(
             f"{path}: metadata.workspace: expected a finite offset, scale > 0 and a unit "
-            f"orientation, got {meta['workspace']!r}"
+            f"orientation, got {shown(meta['workspace'])}"
         )
     return Workspace(offset, scale, orientation / norm, bool(ws.get("fitted", False)))
 
@@ -416,13 +420,14 @@ def _home_counts(path: Path, meta: dict[str, str], n: int) -> np.ndarray:
     home = calibration.get("home_counts") if isinstance(calibration, dict) else None
     if not (isinstance(home, list) and len(home) == n and all(_is_int(c) for c in home)):
         raise SessionError(
-            f"{path}: metadata.calibration.home_counts: expected {n} integers, got {home!r}"
+            f"{path}: metadata.calibration.home_counts: expected {n} integers, got {shown(home)}"
         )
     return np.array(home, dtype=np.int64)
 
 
 def _is_int(value: Any) -> bool:
-    return isinstance(value, int) and not isinstance(value, bool)
+    """An encoder count: an integer of a 32-bit counter."""
+    return isinstance(value, int) and not isinstance(value, bool) and abs(value) < 2**31
 
 
 def _build(path: Path, meta: dict[str, str], raw: list, complete: bool) -> Session:
@@ -430,7 +435,7 @@ def _build(path: Path, meta: dict[str, str], raw: list, complete: bool) -> Sessi
     if version not in FORMATS_READ:
         raise SessionError(
             f"{path}: metadata.format: expected {' or '.join(FORMATS_READ)} (a newer puppetcli "
-            f"wrote this file), got {version!r}"
+            f"wrote this file), got {shown(version)}"
         )
     dev = _device(path, meta)
     columns: dict[str, list] = {topic: [] for topic in CHANNELS}
@@ -481,14 +486,14 @@ def parse_message(where: str, topic: str, data: bytes, log_ns: int, n: int) -> d
     """Decode one JSON message and check the fields a replay uses (one error line each)."""
     try:
         value = json.loads(data)
-    except ValueError as exc:
-        raise SessionError(f"{where}: expected a JSON message, got {data[:40]!r}") from exc
+    except (ValueError, RecursionError) as exc:
+        raise SessionError(f"{where}: expected a JSON message, got {shown(data[:40])}") from exc
     if not isinstance(value, dict):
         raise SessionError(f"{where}: expected a JSON object, got {type(value).__name__}")
     t = value.get("t")
     if not isinstance(t, int | float) or isinstance(t, bool) or abs(t * 1e9 - log_ns) > 1e3:
         raise SessionError(
-            f"{where}: t: expected the message's log time {log_ns * 1e-9:.9g} s, got {t!r}"
+            f"{where}: t: expected the message's log time {log_ns * 1e-9:.9g} s, got {shown(t)}"
         )
     if topic == "/spidar/counts":
         counts = value.get("counts")
@@ -505,7 +510,7 @@ def parse_message(where: str, topic: str, data: bytes, log_ns: int, n: int) -> d
     else:
         if value.get("action") not in ("push", "expect"):
             raise SessionError(
-                f"{where}: action: expected 'push' or 'expect', got {value.get('action')!r}"
+                f"{where}: action: expected 'push' or 'expect', got {shown(value.get('action'))}"
             )
     return value
 
@@ -514,16 +519,22 @@ def _vector(where: str, value: dict, key: str, size: int) -> None:
     v = value.get(key)
     ok = isinstance(v, list) and len(v) == size
     if not (ok and all(isinstance(x, int | float) and np.isfinite(x) for x in v)):
-        raise SessionError(f"{where}: {key}: expected {size} finite numbers, got {v!r}")
+        raise SessionError(f"{where}: {key}: expected {size} finite numbers, got {shown(v)}")
 
 
 def _button(where: str, value: dict) -> None:
     if not isinstance(value.get("button"), str):
-        raise SessionError(f"{where}: button: expected a button name, got {value.get('button')!r}")
+        raise SessionError(
+            f"{where}: button: expected a button name, got {shown(value.get('button'))}"
+        )
     if value.get("state") not in ("down", "up"):
-        raise SessionError(f"{where}: state: expected 'down' or 'up', got {value.get('state')!r}")
+        raise SessionError(
+            f"{where}: state: expected 'down' or 'up', got {shown(value.get('state'))}"
+        )
     for key, kind in _BUTTON_KEYS.items():
         if key in value and not isinstance(value[key], kind):
-            raise SessionError(f"{where}: {key}: expected a {kind.__name__}, got {value[key]!r}")
+            raise SessionError(
+                f"{where}: {key}: expected a {kind.__name__}, got {shown(value[key])}"
+            )
     if "point" in value:
         _vector(where, value, "point", 3)

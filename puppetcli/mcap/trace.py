@@ -35,7 +35,7 @@ from mcap.reader import make_reader
 from mcap.writer import CompressionType, Writer
 from zstandard import ZstdError
 
-from puppetcli.errors import PuppetError
+from puppetcli.errors import PuppetError, shown
 from puppetcli.jsontext import json_bytes
 from puppetcli.mcap.template import MessageTemplate, Slot, slots
 from puppetcli.outputs import atomic_path
@@ -104,7 +104,7 @@ def library_name() -> str:
 def ns_from_seconds(t: float) -> int:
     """Simulated time (s) as MCAP integer nanoseconds; rejects negative or non-finite times."""
     if not math.isfinite(t) or t < 0.0:
-        raise ValueError(f"trace time must be finite and non-negative, got {t!r}")
+        raise ValueError(f"trace time must be finite and non-negative, got {shown(t)}")
     return round(t * 1e9)
 
 
@@ -518,10 +518,10 @@ def read_trace(path: Path) -> dict[str, list[tuple[int, dict]]]:
 
 def _decode(path: Path, topic: str, encoding: str, message: Any) -> dict:
     if encoding != "json":
-        raise TraceError(f"{path}: {topic}: expected json messages, got {encoding!r}")
+        raise TraceError(f"{path}: {topic}: expected json messages, got {shown(encoding)}")
     try:
         return json.loads(message.data)
-    except ValueError as exc:
+    except (ValueError, RecursionError) as exc:
         raise TraceError(
             f"{path}: {topic} at log_time {message.log_time}: expected JSON, got {exc}"
         ) from exc

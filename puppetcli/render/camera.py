@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from puppetcli.errors import PuppetError
+from puppetcli.errors import PuppetError, shown
 
 __all__ = ["VIEWS", "Camera", "RenderError", "View", "fit_camera", "parse_size", "parse_view"]
 
@@ -64,18 +64,20 @@ def parse_view(text: str) -> View:
         return View(*VIEWS[name], name=name)
     expected = f"one of {', '.join(VIEWS)} or custom:AZIMUTH,ELEVATION[,DISTANCE]"
     if not name.startswith("custom:"):
-        raise RenderError(f"--view: expected {expected}, got {text!r}")
+        raise RenderError(f"--view: expected {expected}, got {shown(text)}")
     parts = name[len("custom:") :].split(",")
     try:
         values = [float(p) for p in parts]
     except ValueError:
         values = []
     if len(values) not in (2, 3) or not all(math.isfinite(v) for v in values):
-        raise RenderError(f"--view: expected {expected} (numbers), got {text!r}")
+        raise RenderError(f"--view: expected {expected} (numbers), got {shown(text)}")
     if not -90.0 <= values[1] <= 90.0:
         raise RenderError(f"--view: expected an elevation in [-90, 90] degrees, got {values[1]:g}")
-    if len(values) == 3 and values[2] <= 0.0:
-        raise RenderError(f"--view: expected a positive distance (m), got {values[2]:g}")
+    if not -360.0 <= values[0] <= 360.0:
+        raise RenderError(f"--view: expected an azimuth in [-360, 360] degrees, got {values[0]:g}")
+    if len(values) == 3 and not 0.0 < values[2] <= 1e4:
+        raise RenderError(f"--view: expected a distance in (0, 1e4] m, got {values[2]:g}")
     return View(values[0], values[1], values[2] if len(values) == 3 else None)
 
 
@@ -83,7 +85,9 @@ def parse_size(text: str) -> tuple[int, int]:
     """``WxH`` in pixels, e.g. ``480x480``; each side 16 … 8192."""
     match = re.fullmatch(r"\s*(\d+)\s*[xX×]\s*(\d+)\s*", text)
     if not match:
-        raise RenderError(f"--size: expected WIDTHxHEIGHT in pixels (e.g. 480x480), got {text!r}")
+        raise RenderError(
+            f"--size: expected WIDTHxHEIGHT in pixels (e.g. 480x480), got {shown(text)}"
+        )
     w, h = int(match.group(1)), int(match.group(2))
     if not (16 <= w <= MAX_SIZE and 16 <= h <= MAX_SIZE):
         raise RenderError(f"--size: expected each side in 16 … {MAX_SIZE} px, got {w}x{h}")

@@ -31,11 +31,13 @@ from typing import Any
 
 import numpy as np
 
+from puppetcli.errors import shown
 from puppetcli.mcap.trace import PUPPET_FRAME, read_trace
 from puppetcli.render.camera import RenderError
 from puppetcli.render.picture import Pose, poses_from_keys
 from puppetcli.rig.skeleton import Skeleton
 from puppetcli.run.keyframes import read_keyframes
+from puppetcli.yamldoc import LARGEST
 from solver import quat
 
 __all__ = ["INPUT_KINDS", "input_kind", "key_poses", "trace_poses"]
@@ -129,8 +131,11 @@ def key_poses(path: Path, kind: str, skel: Skeleton) -> list[Pose]:
     return poses_from_keys(skel, keys)
 
 
-def _vec(d: dict) -> list[float]:
-    return [float(d["x"]), float(d["y"]), float(d["z"])]
+def _vec(d: dict, keys: str = "xyz") -> list[float]:
+    values = [float(d[k]) for k in keys]
+    if not all(abs(v) <= LARGEST for v in values):  # NaN fails too
+        raise ValueError(f"expected finite numbers, got {shown(values)}")
+    return values
 
 
 def _tf_pose(msg: dict) -> tuple[list[str], np.ndarray, np.ndarray]:
@@ -142,7 +147,7 @@ def _tf_pose(msg: dict) -> tuple[list[str], np.ndarray, np.ndarray]:
             continue  # world → puppet: the Z-up display frame, not part of the doll
         head_p, q_p = frames[t["parent_frame_id"]]
         r = t["rotation"]
-        q_rel = np.array([r["w"], r["x"], r["y"], r["z"]], dtype=float)
+        q_rel = np.array(_vec(r, "wxyz"))
         head = head_p + quat.rotate(q_p, np.array(_vec(t["translation"])))
         frames[t["child_frame_id"]] = (head, quat.normalize(quat.mul(q_p, q_rel)))
         names.append(t["child_frame_id"])
@@ -193,7 +198,12 @@ def _step_pose(
     if tf is None:
         rest = skel.tail0 - skel.head0
         rot = np.array([_arc(a, b) for a, b in zip(rest, tail - head, strict=True)])
-    return Pose(head, tail, rot, "", ns / 1e9, **_pointer(pointer))
+    pose = Pose(head, tail, rot, "", ns / 1e9, **_pointer(pointer))
+    values = [pose.head, pose.tail, pose.rot, pose.pointer, pose.grip, pose.pointer_radius]
+    for value in values:
+        if value is not None and not np.all(np.abs(value) <= LARGEST):  # NaN fails too
+            raise RenderError(f"{where}: expected finite coordinates, got {shown(value)}")
+    return pose
 
 
 def _arc(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -35,7 +35,8 @@ from solver.spec import RigSpec
 
 __all__ = ["Pose", "draw_ground", "draw_items", "pose_extent", "prop_extent"]
 
-GRID_STEP = 0.25  # m between ground grid lines
+GRID_STEP = 0.25  # m between ground grid lines (× 10 while a side would have more lines)
+MAX_GRID_LINES = 60
 GRID_MARGIN = 0.3  # m of ground shown around the scene
 SHADOW_FADE = 1.0  # m above the ground where a shadow fades out
 SHADOW_DARK = 0.6  # darkening of the ground under a bone touching it
@@ -210,14 +211,19 @@ def _ground_polygon(cam: Camera, corners: np.ndarray) -> np.ndarray | None:
 
 def draw_ground(img: np.ndarray, cam: Camera, height: float, bounds: np.ndarray) -> None:
     """The ground plane y = ``height`` over ``bounds`` (x0, x1, z0, z1): fill and grid lines."""
+    if not np.all(np.isfinite(bounds)):
+        return
     x0, x1, z0, z1 = bounds
     quad = np.array([[x0, height, z0], [x1, height, z0], [x1, height, z1], [x0, height, z1]])
     poly = _ground_polygon(cam, quad)
     if poly is not None and len(poly) >= 3:
         draw.fill_polygon(img, poly, GROUND_COLOR)
     width = max(1, round(img.shape[0] / 480))
-    xs = np.arange(x0, x1 + 1e-9, GRID_STEP)
-    zs = np.arange(z0, z1 + 1e-9, GRID_STEP)
+    step = GRID_STEP  # × 10 until a wide ground has at most MAX_GRID_LINES lines a side
+    while max(x1 - x0, z1 - z0) > MAX_GRID_LINES * step:
+        step *= 10.0
+    xs = np.arange(x0, x1 + 1e-9, step)
+    zs = np.arange(z0, z1 + 1e-9, step)
     segments = [((x, z0), (x, z1)) for x in xs] + [((x0, z), (x1, z)) for z in zs]
     for (ax, az), (bx, bz) in segments:
         seg = _ground_polygon(cam, np.array([[ax, height, az], [bx, height, bz]]))

@@ -17,21 +17,27 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from puppetcli.errors import shown
 from puppetcli.render.camera import RenderError
 from puppetcli.render.picture import Framing, Pose, render_pose
 from puppetcli.rig.skeleton import Skeleton
 from solver.spec import RigSpec
 
-__all__ = ["CODECS", "frame_indices", "write_video"]
+__all__ = ["CODECS", "frame_count", "frame_indices", "write_video"]
 
 CODECS = {".mp4": "mp4v", ".avi": "MJPG"}
 
 
+def frame_count(times: Sequence[float], fps: float) -> int:
+    """Frames of a video at ``fps`` from the first to the last of ``times`` (0 if none)."""
+    if not times:
+        return 0
+    return int(np.floor((times[-1] - times[0]) * fps + 1e-9)) + 1
+
+
 def frame_indices(times: Sequence[float], fps: float) -> list[int]:
     """Index of the step shown in each video frame: the last step at or before t0 + k/fps."""
-    if not times:
-        return []
-    n = int(np.floor((times[-1] - times[0]) * fps + 1e-9)) + 1
+    n = frame_count(times, fps)
     return [max(0, bisect.bisect_right(times, times[0] + k / fps + 1e-12) - 1) for k in range(n)]
 
 
@@ -48,7 +54,7 @@ def write_video(
     path = Path(path)
     codec = CODECS.get(path.suffix.lower())
     if codec is None:
-        raise RenderError(f"--video: expected an .mp4 or .avi file name, got {path.name!r}")
+        raise RenderError(f"--video: expected an .mp4 or .avi file name, got {shown(path.name)}")
     tmp = path.with_name(f".{path.stem}.tmp-{os.getpid()}{path.suffix}")
     writer = cv2.VideoWriter(str(tmp), cv2.VideoWriter_fourcc(*codec), fps, framing.camera.size)
     try:

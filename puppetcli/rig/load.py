@@ -35,7 +35,14 @@ from solver.spec import (
     SolverSpec,
 )
 
-__all__ = ["SOLVER_METHODS", "load_rig", "rig_from_text", "solver_overrides"]
+__all__ = [
+    "SOLVER_METHODS",
+    "STEP_RANGE",
+    "load_rig",
+    "read_step",
+    "rig_from_text",
+    "solver_overrides",
+]
 
 SOLVER_METHODS = ("auto", "pgs", "hybrid", "direct", "reference")
 DEFAULT_DENSITY = 1000.0  # kg/m³, water: a plausible body density
@@ -69,8 +76,16 @@ def rig_from_text(text: str, source: str) -> RigSpec:
     return _rig_from_document(load_text(text, source, RigError))
 
 
+STEP_RANGE = (1e-5, 0.1)  # s: a physics step outside this is a mistake (rig, script, --h)
+
+
+def read_step(node: Node) -> float:
+    """A physics step h (s) in STEP_RANGE."""
+    return node.number(*STEP_RANGE)
+
+
 _SOLVER_READERS: dict[str, Callable[[Node], Any]] = {
-    "h": Node.positive,
+    "h": read_step,
     "method": lambda node: node.choice(SOLVER_METHODS),
     "iterations": lambda node: node.integer(1),
     "warm_start": Node.boolean,

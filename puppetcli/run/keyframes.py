@@ -28,8 +28,9 @@ from typing import Any, NoReturn
 
 import numpy as np
 
-from puppetcli.errors import PuppetError
+from puppetcli.errors import PuppetError, shown
 from puppetcli.outputs import write_json_atomic
+from puppetcli.yamldoc import LARGEST
 
 __all__ = [
     "BonePose",
@@ -95,7 +96,7 @@ class KeyframeSet:
     def add(self, key: Keyframe) -> None:
         """Insert ``key`` in time order, replacing the nearest key less than 1 ns away."""
         if not math.isfinite(key.time):
-            raise ValueError(f"keyframe time must be finite, got {key.time!r}")
+            raise ValueError(f"keyframe time must be finite, got {shown(key.time)}")
         i = bisect.bisect_left([k.time for k in self._keys], key.time)
         near = [j for j in (i - 1, i) if 0 <= j < len(self._keys)]
         j = min(near, key=lambda j: abs(self._keys[j].time - key.time), default=None)
@@ -198,6 +199,8 @@ def _number(path: Path, value: Any, where: str) -> float:
         ok = False
     if not ok:
         _fail(path, where, "a finite number", _describe(value))
+    if abs(value) > LARGEST:
+        _fail(path, where, f"a number of magnitude at most {LARGEST:g}", _describe(value))
     return float(value)
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from puppetcli.bvh.write import write_keys_bvh
+from puppetcli.render.camera import View
 from puppetcli.render.picture import render_keys
 from puppetcli.rig.skeleton import Skeleton
 from puppetcli.run.keyframes import Keyframe, write_keyframes
@@ -22,7 +23,7 @@ KEY_OUTPUTS = ["keyframes.json", "keyframes.bvh", "sheet.png", "keys"]
 def write_key_outputs(
     outdir: Path, spec: RigSpec, rig_name: str, keys: list[Keyframe], *, render: bool = True,
     order: str = "ZXY", fps: float = 30.0, scale: float = 1.0, interpolate: str | None = None,
-    view: str = "iso",
+    view: View | str = "iso",
 ) -> list[Path]:  # fmt: skip
     """Write the keys' files into ``outdir`` (atomically, each); the paths written."""
     written = [outdir / "keyframes.json"]

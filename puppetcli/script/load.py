@@ -24,7 +24,7 @@ import numpy as np
 import yaml
 
 from puppetcli.errors import ScriptError
-from puppetcli.rig.load import solver_overrides
+from puppetcli.rig.load import read_step, solver_overrides
 from puppetcli.script.actions import (
     Expect,
     Grip,
@@ -158,7 +158,7 @@ def script_from_text(text: str, source: str, rig: RigSpec) -> Script:
 def _script_from_document(doc: Node, rig: RigSpec) -> Script:
     top = doc.mapping(TOP_KEYS, required=("actions",), what="a mapping of script settings")
     solver = top.read("solver", solver_overrides, {})
-    h = top.read("h", Node.positive, None)
+    h = top.read("h", read_step, None)
     if h is not None and "h" in solver:
         top["h"].fail("'h' either at the top level or in 'solver'", got="both")
     context = _context(rig)

@@ -24,7 +24,7 @@ import numpy as np
 from puppetcli.spidar.errors import DeviceError
 from puppetcli.spidar.presets import DevicePreset, preset
 from puppetcli.spidar.strings import MIN_LENGTH, structure_matrix
-from puppetcli.yamldoc import Node, load_file, load_text
+from puppetcli.yamldoc import SMALLEST, Node, load_file, load_text
 from solver import quat
 
 __all__ = ["preset_from_option", "preset_from_text", "preset_from_yaml", "preset_to_yaml"]
@@ -97,8 +97,8 @@ def _read_string(node: Node) -> tuple[np.ndarray, np.ndarray, float, float | Non
     fields = node.mapping(STRING_KEYS, required=required, what="a string mapping")
     kappa_node = fields["metres_per_count"]
     kappa = kappa_node.number()
-    if kappa == 0.0:
-        kappa_node.fail("a non-zero number (signed metres per encoder count)")
+    if abs(kappa) < SMALLEST:
+        kappa_node.fail(f"a number of magnitude at least {SMALLEST:g} (signed metres per count)")
     vpn = fields.read("volts_per_newton", Node.number, None)
     return fields["motor"].vector(3), fields["attach"].vector(3), kappa, vpn
 

@@ -206,21 +206,27 @@ def test_closing_the_last_page_stops_the_session(tmp_path):
 
 
 @pytest.mark.parametrize(
-    ("args", "expected"),
+    ("args", "code", "expected"),
     [
         (
-            ["-o", "{tmp}/s.txt"],
-            "error: {tmp}/s.txt: expected a session file name ending in .mcap, got '.txt'",
+            ["-o", "{tmp}/s.txt"], 2,
+            "error: Invalid value for '-o': expected a session file name ending in .mcap, "
+            "got 's.txt'",
         ),
-        (["-o", "{tmp}/old.mcap"], "error: {tmp}/old.mcap exists: pass --force to overwrite"),
-        (["-o", "{tmp}/s.mcap", "--view", "sideways"], "error: --view: expected one of"),
-        (["-o", "{tmp}/s.mcap", "--device", "SpidarG9"], "error: unknown device preset 'SpidarG9'"),
+        (["-o", "{tmp}/old.mcap"], 1, "error: {tmp}/old.mcap exists: pass --force to overwrite"),
+        (["-o", "{tmp}/s.mcap", "--view", "sideways"], 2,
+         "error: Invalid value for '--view': expected one of"),
+        (["-o", "{tmp}/s.mcap", "--h", "0.5"], 2,
+         "error: Invalid value for '--h': 0.5 is not in the range 0.0001<=x<=0.05."),
+        (["-o", "{tmp}/s.mcap", "--device", "SpidarG9"], 1,
+         "error: unknown device preset 'SpidarG9'"),
     ],
-)
-def test_bad_options_are_one_line_before_anything_starts(tmp_path, args, expected):
+)  # fmt: skip
+def test_bad_options_are_one_line_before_anything_starts(tmp_path, args, code, expected):
+    """Usage mistakes end with status 2, a refused output or an unknown device with 1."""
     (tmp_path / "old.mcap").write_bytes(b"keep me")
     result = CliRunner().invoke(cli, ["live", str(DOLL), *(a.format(tmp=tmp_path) for a in args)])
-    assert result.exit_code == 1
+    assert result.exit_code == code
     lines = result.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith(expected.format(tmp=tmp_path)), lines
     assert (tmp_path / "old.mcap").read_bytes() == b"keep me"

@@ -35,7 +35,9 @@ def test_parse_view(text: str, expected: tuple) -> None:
         ("custom:a,b", "(numbers)"),
         ("custom:1,2,3,4", "(numbers)"),
         ("custom:0,95", "elevation in [-90, 90] degrees, got 95"),
-        ("custom:0,10,-2", "positive distance (m), got -2"),
+        ("custom:0,10,-2", "distance in (0, 1e4] m, got -2"),
+        ("custom:0,10,2e4", "distance in (0, 1e4] m, got 20000"),
+        ("custom:400,10", "azimuth in [-360, 360] degrees, got 400"),
         ("custom:0,nan", "(numbers)"),
     ],
 )

@@ -37,6 +37,15 @@ def one_error(result: Result) -> str:
     return lines[0]
 
 
+def usage_error(result: Result) -> str:
+    """The single stderr line of a command called wrongly (status 2)."""
+    assert result.exit_code == 2, result.output
+    lines = result.stderr.splitlines()
+    assert len(lines) == 1 and lines[0].startswith("error: "), result.stderr
+    assert lines[0].endswith("(see 'cli render --help')"), lines[0]
+    return lines[0]
+
+
 def test_sheet_of_keyframes(tmp_path: Path, keyfile: Path) -> None:
     out = tmp_path / "sheets" / "sheet.png"  # a missing folder is created
     result = run(str(keyfile), "--rig", str(DOLL), "-o", str(out), "--cols", "2",
@@ -77,50 +86,49 @@ def test_sheet_of_a_trace(tmp_path: Path) -> None:
 @pytest.mark.parametrize(
     ("args", "message"),
     [
-        (["--view", "back"], "error: --view: expected one of front, side, top, iso or custom:"),
-        (["--view", "custom:1"], "error: --view: expected one of front, side, top, iso or custom:"),
-        (
-            ["--size", "big"],
-            "error: --size: expected WIDTHxHEIGHT in pixels (e.g. 480x480), got 'big'",
-        ),
-        (["--size", "4x4"], "error: --size: expected each side in 16 … 8192 px, got 4x4"),
-        (["--cols", "0"], "error: --cols: expected a positive number of columns, got 0"),
-        (["--fps", "0", "--video", "v.mp4"], "error: --video: expected a trace .mcap INPUT"),
-        (["-o", "sheet.jpg"], "error: -o: expected a .png file name, got 'sheet.jpg'"),
+        (["--view", "back"], "'--view': expected one of front, side, top, iso or custom:"),
+        (["--view", "custom:1"], "'--view': expected one of front, side, top, iso or custom:"),
+        (["--size", "big"], "'--size': expected WIDTHxHEIGHT in pixels (e.g. 480x480), got 'big'"),
+        (["--size", "4x4"], "'--size': expected each side in 16 … 8192 px, got 4x4"),
+        (["--cols", "0"], "'--cols': 0 is not in the range 1<=x<=100"),
+        (["--fps", "0", "--video", "v.mp4"], "'--fps': 0.0 is not in the range 1.0<=x<=240.0"),
+        (["--fps", "nan", "--video", "v.mp4"], "'--fps': 'nan' is not a finite number in the"),
+        (["--video", "v.mp4"], "'--video': expected a trace or session .mcap INPUT"),
+        (["-o", "sheet.jpg"], "'-o': expected a .png file name, got 'sheet.jpg'"),
     ],
 )
 def test_option_errors(tmp_path: Path, keyfile: Path, args: list[str], message: str) -> None:
+    """A bad option is a usage error (status 2), found before any file is read or written."""
     full = [str(keyfile), "--rig", str(DOLL), *args]
     if "-o" not in args:
         full += ["-o", str(tmp_path / "s.png")]
-    assert one_error(run(*full)).startswith(message)
+    assert usage_error(run(*full)).startswith(f"error: Invalid value for {message}")
     assert not (tmp_path / "s.png").exists()
 
 
 def test_input_errors(tmp_path: Path, keyfile: Path) -> None:
+    """A missing input or option is a usage error (status 2); a bad file's content, status 1."""
     out = ["-o", str(tmp_path / "s.png")]
     missing = tmp_path / "nope.json"
-    assert one_error(run(str(missing), "--rig", str(DOLL), *out)).startswith(
-        f"error: {missing}: cannot read"
+    assert usage_error(run(str(missing), "--rig", str(DOLL), *out)).startswith(
+        f"error: Invalid value for 'INPUT': File '{missing}' does not exist."
     )
     bad = tmp_path / "bad.json"
     bad.write_text("{")
     assert f"error: {bad}: expected JSON" in one_error(run(str(bad), "--rig", str(DOLL), *out))
-    assert one_error(run(str(keyfile), *out)) == (
-        f"error: {keyfile}: --rig RIG is required (it gives the bones' shapes)"
-    )
-    assert one_error(run(str(keyfile), "--rig", str(tmp_path / "no.yaml"), *out)).startswith(
-        f"error: {tmp_path / 'no.yaml'}: cannot read"
+    assert usage_error(run(str(keyfile), *out)).startswith("error: Missing option '--rig'.")
+    assert usage_error(run(str(keyfile), "--rig", str(tmp_path / "no.yaml"), *out)).startswith(
+        f"error: Invalid value for '--rig': File '{tmp_path / 'no.yaml'}' does not exist."
     )
     text = tmp_path / "pose.txt"
     text.write_text("x")
-    assert "expected keyframes.json, a .bvh file or a trace .mcap, got a .txt file" in one_error(
+    assert "expected keyframes.json, a .bvh file or a trace .mcap, got a .txt file" in usage_error(
         run(str(text), "--rig", str(DOLL), *out)
     )
     corrupt = tmp_path / "trace.mcap"
     corrupt.write_bytes(b"\x89MCAP0\r\n" + b"\0" * 40)
     assert "not a readable MCAP trace" in one_error(run(str(corrupt), "--rig", str(DOLL), *out))
-    assert one_error(run(str(keyfile), "--rig", str(DOLL))) == (
+    assert usage_error(run(str(keyfile), "--rig", str(DOLL))).startswith(
         "error: nothing to write: give -o SHEET.png and/or --video OUT.mp4"
     )
 

@@ -179,7 +179,6 @@ def test_unknown_bone_suggests(tmp_path: Path, rig: RigSpec) -> None:
         ("wait: 4.0", "wait: -4.0", "actions[3].wait", "got -4.0"),
         ("{duration: 1}", "{duration: -1}", "actions[4].wait.duration", "got -1"),
         ("duration: 6.0", "duration: 0.0", "duration", "got 0.0"),
-        ("h: 0.02", "h: -0.02", "h", "got -0.02"),
     ],
 )
 def test_zero_or_negative_durations(
@@ -187,6 +186,14 @@ def test_zero_or_negative_durations(
 ) -> None:
     message, text = bad(tmp_path, rig, old, new)
     expect(message, tmp_path, line_of(text, new), path, "a positive finite number", got)
+
+
+@pytest.mark.parametrize("new", ["h: -0.02", "h: 0", "h: 0.5", "h: 1e-7"])
+def test_step_outside_its_range(tmp_path: Path, rig: RigSpec, new: str) -> None:
+    """A step h outside [1e-5, 0.1] s is refused where it is read, the range in the line."""
+    message, text = bad(tmp_path, rig, "h: 0.02", new)
+    got = f"got {new.split()[1]}"
+    expect(message, tmp_path, line_of(text, new), "h", "a number in [1e-05, 0.1]", got)
 
 
 @pytest.mark.parametrize("value", [".nan", ".inf", "-.inf", "1e999"])

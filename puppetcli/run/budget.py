@@ -1,0 +1,79 @@
+"""How long a run will take, estimated before it starts, and the refusal of a run that would
+take far longer than a user is likely to have meant (a tiny ``h``, a duration in hours, a
+session whose clock jumps): such a run stops at once with one line saying what it would cost,
+and ``--yes`` runs it anyway.
+
+The costs are measured figures of this machine class (2026-12-04, doll of 19 bones, compiled
+step): 31,000 steps/s without a trace, 1,760 steps/s writing trace.mcap, 2,500 device ticks/s
+recorded into a session, video frames in 27 ms at 64×64 and 45 ms at 480×480.  An estimate
+within a factor of a few is enough to tell seconds from hours.
+
+The limit is 10 minutes; ``PUPPETCLI_RUN_LIMIT`` (seconds) sets another.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+
+from puppetcli.errors import PuppetError, shown
+
+__all__ = ["LIMIT", "check_budget", "run_length", "simulation_cost", "video_cost"]
+
+LIMIT = 600.0  # s of estimated wall time a command runs without --yes (default)
+SECONDS_PER_BONE_STEP = 1.7e-6  # compiled step: 1 / (31,000 steps/s × 19 bones)
+SECONDS_PER_TRACED_STEP = 5.7e-4  # one step written to trace.mcap (1 / 1,760 steps/s)
+SECONDS_PER_TICK = 4e-4  # one 1 kHz device tick written to a session (1 / 2,500 ticks/s)
+SECONDS_PER_VIDEO_FRAME = 0.025  # one video frame drawn and encoded, and per pixel on top:
+SECONDS_PER_VIDEO_PIXEL = 0.02 / 480**2
+
+
+def run_length(plan) -> float:
+    """Simulated seconds of a script or a session's script: its duration or its timeline."""
+    timeline = sum(getattr(action, "duration", 0.0) for action in plan.actions)
+    return max(plan.duration or 0.0, timeline)
+
+
+def simulation_cost(steps: float, bones: int, traced_steps: float = 0.0) -> float:
+    """Estimated wall seconds of ``steps`` physics steps of a rig of ``bones`` bones, of which
+    ``traced_steps`` are written to a trace."""
+    return steps * bones * SECONDS_PER_BONE_STEP + traced_steps * SECONDS_PER_TRACED_STEP
+
+
+def video_cost(frames: int, size: tuple[int, int]) -> float:
+    """Estimated wall seconds of drawing and encoding ``frames`` frames of ``size`` pixels."""
+    return frames * (SECONDS_PER_VIDEO_FRAME + size[0] * size[1] * SECONDS_PER_VIDEO_PIXEL)
+
+
+def check_budget(source: object, what: str, seconds: float, yes: bool) -> None:
+    """Refuse (``PuppetError``) work estimated at more than the limit unless ``yes``."""
+    limit = _limit()
+    if seconds <= limit or yes:
+        return
+    raise PuppetError(
+        f"{source}: expected a run of at most {_duration(limit)}, got about {_duration(seconds)} "
+        f"({what}); check h and the durations, or pass --yes to run it anyway"
+    )
+
+
+def _limit() -> float:
+    text = os.environ.get("PUPPETCLI_RUN_LIMIT", "")
+    if not text:
+        return LIMIT
+    try:
+        limit = float(text)
+    except ValueError:
+        limit = math.nan
+    if not 0.0 <= limit < math.inf:
+        raise PuppetError(f"PUPPETCLI_RUN_LIMIT: expected seconds >= 0, got {shown(text)}")
+    return limit
+
+
+def _duration(seconds: float) -> str:
+    if seconds < 60:
+        return f"{seconds:.0f} s"
+    if seconds < 3600:
+        return f"{seconds / 60:.0f} min"
+    if seconds < 86400 * 3:
+        return f"{seconds / 3600:.1f} h"
+    return f"{seconds / 86400:,.0f} days"
