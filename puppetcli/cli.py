@@ -8,6 +8,7 @@ command runs, so ``puppetcli --help`` stays fast.
 from __future__ import annotations
 
 import importlib
+from typing import NoReturn
 
 import click
 
@@ -58,13 +59,22 @@ class LazyGroup(click.Group):
         try:
             return super().invoke(ctx)
         except PuppetError as exc:
-            click.echo(f"error: {one_line(str(exc))}", err=True)
-            ctx.exit(1)
+            _fail(ctx, one_line(str(exc)), getattr(exc, "exit_code", 1))  # Interrupted: 130
+        except KeyboardInterrupt:  # Ctrl-C outside a run (a run saves its part and says so)
+            _fail(ctx, "interrupted", 130)
         except click.UsageError as exc:  # a bad option or argument: one line too, status 2
             where = exc.ctx.command_path if exc.ctx is not None else ctx.command_path
-            message = one_line(exc.format_message())
-            click.echo(f"error: {message} (see '{where} --help')", err=True)
-            ctx.exit(2)
+            _fail(ctx, f"{one_line(exc.format_message())} (see '{where} --help')", 2)
+
+
+def _fail(ctx: click.Context, message: str, exit_code: int) -> NoReturn:
+    """End the command: the one ``error:`` line on stderr (and, with --json, the failure as
+    the JSON document on stdout), then the exit status of the README's table."""
+    from puppetcli.commands.report import emit_failure
+
+    click.echo(f"error: {message}", err=True)
+    emit_failure(ctx, message, exit_code)
+    ctx.exit(exit_code)
 
 
 @click.group(cls=LazyGroup, context_settings={"help_option_names": ["-h", "--help"]})

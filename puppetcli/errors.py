@@ -8,8 +8,8 @@ import reprlib
 from solver.errors import PuppetError, SimulationError
 
 __all__ = [
-    "PuppetError", "RigError", "ScriptError", "SessionError", "SimulationError", "clip",
-    "one_line", "shown",
+    "Interrupted", "PuppetError", "RigError", "ScriptError", "SessionError", "SimulationError",
+    "clip", "one_line", "shown",
 ]  # fmt: skip
 
 MAX_LINE = 400  # characters of an error line; a message longer than this is cut in the middle
@@ -29,6 +29,16 @@ class ScriptError(PuppetError):
 
 class SessionError(PuppetError):
     """A recorded session file is unreadable or invalid."""
+
+
+class Interrupted(PuppetError):
+    """The user pressed Ctrl-C (SIGINT) during a run: what it captured is saved; status 130."""
+
+    exit_code = 130
+
+    def __init__(self, step: int, time: float) -> None:
+        super().__init__(f"interrupted at step {step} (t = {time:.6g} s)")
+        self.step, self.time = step, time
 
 
 def shown(value: object) -> str:

@@ -18,6 +18,7 @@ from puppetcli.bench.solvers import (
     stage_table,
 )
 from puppetcli.commands.options import STEP, Number
+from puppetcli.commands.report import JSON_OPTION, emit, rows_json
 from puppetcli.outputs import write_text_atomic
 
 SOLVER_CHOICES = [*SOLVERS, "reference"]
@@ -105,6 +106,7 @@ SOLVER_CHOICES = [*SOLVERS, "reference"]
     help="With --precision: write precision.csv and precision.png into this directory "
     "(created if missing; those two files are replaced).",
 )
+@JSON_OPTION
 def command(
     steps_h: tuple[float, ...],
     solvers: tuple[str, ...],
@@ -118,6 +120,7 @@ def command(
     pose: bool,
     quick: bool,
     out_dir: Path | None,
+    as_json: bool,
 ) -> None:
     """Measure steps per second of the solvers on the doll.
 
@@ -147,34 +150,37 @@ def command(
 
         source = click.get_current_context().get_parameter_source("steps_h")
         default = source == click.core.ParameterSource.DEFAULT
-        click.echo(format_live(measure_live([0.001, 0.005] if default else list(steps_h))))
+        rows = measure_live([0.001, 0.005] if default else list(steps_h))
+        emit({"live": rows_json(rows)}, [format_live(rows)])
         return
     if pose:
         from puppetcli.bench.pose import format_pose, measure_pose
 
         source = click.get_current_context().get_parameter_source("steps_h")
         default = source == click.core.ParameterSource.DEFAULT
-        click.echo(format_pose(measure_pose([None, 0.001] if default else list(steps_h))))
+        rows = measure_pose([None, 0.001] if default else list(steps_h))
+        emit({"pose": rows_json(rows)}, [format_pose(rows)])
         return
     if skips:
         from puppetcli.bench.skips import format_skips, measure_skips
 
-        click.echo(format_skips(measure_skips(steps_h[0], seconds), steps_h[0]))
+        rows = measure_skips(steps_h[0], seconds)
+        emit({"skips": rows_json(rows)}, [format_skips(rows, steps_h[0])])
         return
     use_peers = peers and _peers_available()
     if precision:
         _precision(quick, out_dir, use_peers)
         return
     rows = measure(doll_scenes(), list(steps_h), list(solvers), seconds, engines, use_peers)
-    click.echo(format_table(rows))
-    for line in peer_summary(rows):
-        click.echo(line)
-    click.echo(
-        f"\nwhere the time goes: doll, auto, h = {steps_h[0]:g} s (compiled step, per stage)"
-    )
-    click.echo(stage_table(doll_stages(steps_h[0], seconds)))
+    stages = doll_stages(steps_h[0], seconds)
     if csv_path is not None:
         write_text_atomic(csv_path, csv_text(rows))
+    lines = [format_table(rows), *peer_summary(rows)]
+    lines.append(
+        f"\nwhere the time goes: doll, auto, h = {steps_h[0]:g} s (compiled step, per stage)"
+    )
+    lines.append(stage_table(stages))
+    emit({"rows": rows_json(rows), "peers": peer_summary(rows), "stages": stages}, lines)
 
 
 def _peers_available() -> bool:
@@ -182,7 +188,7 @@ def _peers_available() -> bool:
     from puppetcli.bench import peers
 
     version = peers.mujoco_version()
-    click.echo(INSTALL_HINT if version is None else f"peers: MuJoCo {version}")
+    click.echo(INSTALL_HINT if version is None else f"peers: MuJoCo {version}", err=True)
     return version is not None
 
 
@@ -193,9 +199,8 @@ def _precision(quick: bool, out_dir: Path | None, peers: bool) -> None:
     from puppetcli.bench.verdict import verdicts
 
     rows = study(quick=quick, peers=peers)
-    click.echo(precision_table(rows))
-    for line in verdicts(rows) + stability_lines(peers):
-        click.echo(line)
-    if out_dir is not None:
-        for path in write_outputs(rows, out_dir):
-            click.echo(f"wrote {path}")
+    notes = verdicts(rows) + stability_lines(peers)
+    written = write_outputs(rows, out_dir) if out_dir is not None else ()
+    lines = [precision_table(rows), *notes, *(f"wrote {path}" for path in written)]
+    emit({"precision": rows_json(rows), "verdicts": notes, "outputs": [str(p) for p in written]},
+         lines)  # fmt: skip

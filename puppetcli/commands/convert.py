@@ -19,6 +19,7 @@ from puppetcli.commands.options import (
     order_option,
     scale_option,
 )
+from puppetcli.commands.report import JSON_OPTION, emit
 from puppetcli.errors import ScriptError
 from puppetcli.mcap.replay import load_replay
 from puppetcli.outputs import make_parent, refuse_overwrite
@@ -52,6 +53,7 @@ KEYS_FPS = 30.0  # Frame Time of a BVH of keys when no --fps is given
 @force_option("OUT.bvh if it exists")
 @ENGINE_OPTION
 @YES_OPTION
+@JSON_OPTION
 def command(
     source: Path,
     out: Path,
@@ -62,6 +64,7 @@ def command(
     force: bool,
     engine: str,
     yes: bool,
+    as_json: bool,
 ) -> None:
     """Run the manipulation script SOURCE (.yaml), or replay the recorded session SOURCE
     (.mcap, see docs/sessions.md), on RIG and write its motion as BVH.
@@ -93,7 +96,13 @@ def command(
     make_parent(out)
     write_keys_bvh(out, Skeleton.from_spec(spec), frames, order.upper(), scale, fps or KEYS_FPS)
     what = f"{len(frames)} frames at {fps:g} fps" if fps else f"{len(frames)} keys"
-    click.echo(f"wrote {out}: {what}, {result.state.time:.3f} s simulated, order {order.upper()}")
+    line = f"wrote {out}: {what}, {result.state.time:.3f} s simulated, order {order.upper()}"
+    facts = {
+        "ok": result.error is None, "out": str(out), "frames": len(frames), "fps": fps or KEYS_FPS,
+        "per_key": fps is None, "simulated": round(result.state.time, 9), "order": order.upper(),
+        "scale": scale, "error": None if result.error is None else str(result.error),
+    }  # fmt: skip
+    emit(facts, [line])
     if result.error is not None:
         raise result.error
 

@@ -19,6 +19,7 @@ from puppetcli.commands.options import (
     step_option,
     view_option,
 )
+from puppetcli.commands.report import JSON_OPTION, emit
 from puppetcli.errors import ScriptError
 from puppetcli.mcap.replay import Replay, load_replay
 from puppetcli.outputs import prepare_outdir
@@ -77,6 +78,7 @@ OUTPUTS = ["keyframes.json", "keyframes.bvh", "trace.mcap", "sheet.png", "keys"]
 @view_option("the pictures")
 @ENGINE_OPTION
 @YES_OPTION
+@JSON_OPTION
 def command(
     rig: Path,
     script: Path,
@@ -93,6 +95,7 @@ def command(
     view: View,
     engine: str,
     yes: bool,
+    as_json: bool,
 ) -> None:
     """Run a manipulation script (or replay a session .mcap) on a rig: keyframes, BVH, a
     trace and pictures.
@@ -121,12 +124,14 @@ def command(
     prepare_outdir(outdir, [name for name in OUTPUTS if name not in skipped], force)
     model, upgrade = prepare_engine(model, engine, rig)
     result = _run(model, plan, outdir, trace_every, no_trace, replay, upgrade)
-    write_key_outputs(
+    written = write_key_outputs(
         outdir, spec, model.name, list(result.keys), render=not no_render, order=order.upper(),
         fps=fps, scale=scale, interpolate=None if interpolate == "none" else interpolate,
         view=view,
     )  # fmt: skip
-    _report(result, model.options.h)
+    if not no_trace:
+        written.append(outdir / "trace.mcap")
+    _report(result, model.options.h, written)
     if result.error is not None:
         raise result.error
     failed = [r for r in result.expectations if not r.passed]
@@ -166,15 +171,30 @@ def _progress(steps: int):
         yield bar.update
 
 
-def _report(result: RunResult, h: float) -> None:
-    rate = result.steps / result.wall_time if result.wall_time > 0 else float("inf")
+def _report(result: RunResult, h: float, written: list[Path]) -> None:
+    rate = result.steps / result.wall_time if result.wall_time > 0 else None
     passed = sum(r.passed for r in result.expectations)
     lines = [
         f"{len(result.keys)} keys, {result.state.time:.3f} s simulated in {result.wall_time:.2f} s "
-        f"({result.steps} steps of {h:g} s, {rate:,.0f} steps/s)",
+        f"({result.steps} steps of {h:g} s, {rate or 0:,.0f} steps/s)",
         f"peak force on the doll {result.peak_force:.1f} N, "
         f"peak displayed {result.peak_displayed:.1f} N",
     ]
     if result.expectations:
         lines.append(f"expectations: {passed} of {len(result.expectations)} passed")
-    click.echo("\n".join(lines))
+    failed = passed < len(result.expectations)
+    facts = {
+        "ok": result.error is None and not failed,
+        "keys": [{"label": k.label, "time": k.time} for k in result.keys],
+        "simulated": round(result.state.time, 9),
+        "wall_time": result.wall_time,
+        "steps": result.steps,
+        "h": h,
+        "steps_per_second": rate,
+        "peak_force": result.peak_force,
+        "peak_displayed": result.peak_displayed,
+        "expectations": [{"passed": r.passed, "message": r.message} for r in result.expectations],
+        "outputs": [str(path) for path in written],
+        "error": None if result.error is None else str(result.error),
+    }
+    emit(facts, lines)

@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from puppetcli.commands.options import YES_OPTION, Number, force_option
+from puppetcli.commands.report import JSON_OPTION, emit
 from puppetcli.errors import shown
 from puppetcli.mcap.record import record_session
 from puppetcli.mcap.session import TICK, write_session
@@ -47,9 +48,10 @@ DEFAULT_DEVICE = "SpidarG6X3R"
 @click.option("--with-pose", is_flag=True, help="Also store the true grip pose (/spidar/pose).")
 @force_option("SESSION.mcap if it exists")
 @YES_OPTION
+@JSON_OPTION
 def command(
     rig: Path, script: Path, out: Path, device: str, noise: float, seed: int, with_pose: bool,
-    force: bool, yes: bool,
+    force: bool, yes: bool, as_json: bool,
 ) -> None:  # fmt: skip
     """Turn the manipulation script SCRIPT into the session a SPIDAR-G device would record.
 
@@ -78,8 +80,15 @@ def command(
     ws = session.workspace
     how = "fitted to 80 % of the reach" if ws.fitted else "from the script"
     offset = ", ".join(f"{x:g}" for x in ws.offset)
-    click.echo(
+    line = (
         f"wrote {out}: {len(session.tick_time)} ticks ({session.tick_time[-1]:.3f} s) on "
         f"{session.preset.name}, {len(session.events)} events; workspace offset [{offset}] m, "
         f"scale {ws.scale:g} ({how})"
     )
+    facts = {
+        "out": str(out), "ticks": len(session.tick_time),
+        "duration": round(float(session.tick_time[-1]), 9), "device": session.preset.name,
+        "events": len(session.events),
+        "workspace": {"offset": ws.offset, "scale": ws.scale, "fitted": ws.fitted},
+    }  # fmt: skip
+    emit(facts, [line])

@@ -10,6 +10,7 @@ from pathlib import Path
 import click
 
 from puppetcli.commands.options import SIZE, YES_OPTION, Number, force_option, view_option
+from puppetcli.commands.report import JSON_OPTION, emit
 from puppetcli.errors import shown
 from puppetcli.mcap.replay import load_replay, replay_traced
 from puppetcli.mcap.session import is_session
@@ -72,6 +73,7 @@ from solver.model import build_model
 )
 @force_option("existing output files")
 @YES_OPTION
+@JSON_OPTION
 def command(
     input_path: Path,
     sheet: Path | None,
@@ -83,6 +85,7 @@ def command(
     fps: float,
     force: bool,
     yes: bool,
+    as_json: bool,
 ) -> None:
     """Draw poses: a contact sheet of keys, or a video of a trace.
 
@@ -102,19 +105,27 @@ def command(
         steps, poses = trace_poses(input_path, skel)
     else:
         steps, poses = [], key_poses(input_path, kind, skel)
-    if sheet is not None:
-        framing = frame_poses(skel, poses, spec, camera_view, panel)
-        ncols = cols if cols is not None else default_cols(len(poses))
-        make_parent(sheet)
-        write_png(sheet, contact_sheet([render_pose(skel, p, spec, framing) for p in poses], ncols))
-        rows = -(-len(poses) // min(ncols, len(poses)))
-        click.echo(f"{sheet}: {len(poses)} panels, {min(ncols, len(poses))} × {rows}, "
-                   f"{camera_view.name} view, {panel[0]}x{panel[1]} px each")  # fmt: skip
-    if video is not None:
-        frames = frame_count([p.time for p in steps], fps)
+    frames = frame_count([p.time for p in steps], fps) if video is not None else 0
+    if video is not None:  # refused before anything is written
         what = f"{frames:,} video frames at {fps:g} fps"
         check_budget(input_path, what, video_cost(frames, panel), yes)
-        _video(video, skel, steps, spec, frame_poses(skel, steps, spec, camera_view, panel), fps)
+    facts: dict = {"input": str(input_path), "view": camera_view.name, "size": list(panel)}
+    lines = []
+    if sheet is not None:
+        framing = frame_poses(skel, poses, spec, camera_view, panel)
+        ncols = min(cols if cols is not None else default_cols(len(poses)), len(poses))
+        make_parent(sheet)
+        write_png(sheet, contact_sheet([render_pose(skel, p, spec, framing) for p in poses], ncols))
+        rows = -(-len(poses) // ncols)
+        lines.append(f"{sheet}: {len(poses)} panels, {ncols} × {rows}, "
+                     f"{camera_view.name} view, {panel[0]}x{panel[1]} px each")  # fmt: skip
+        facts["sheet"] = {"out": str(sheet), "panels": len(poses), "cols": ncols, "rows": rows}
+    if video is not None:
+        framing = frame_poses(skel, steps, spec, camera_view, panel)
+        n = _video(video, skel, steps, spec, framing, fps, frames)
+        lines.append(f"{video}: {n} frames at {fps:g} fps ({len(steps)} recorded steps)")
+        facts["video"] = {"out": str(video), "frames": n, "fps": fps, "steps": len(steps)}
+    emit(facts, lines)
 
 
 def _check_request(
@@ -166,14 +177,13 @@ def _session_poses(path: Path, spec, skel: Skeleton, yes: bool):
         return trace_poses(Path(tmp) / "trace.mcap", skel)
 
 
-def _video(path: Path, skel, steps, spec, framing, fps: float) -> None:
+def _video(path: Path, skel, steps, spec, framing, fps: float, frames: int) -> int:
+    """Write the video of ``steps``; the frames written."""
     from puppetcli.render.video import write_video
 
     make_parent(path)
-    total = frame_count([p.time for p in steps], fps)
-    with _progress(total) as tick:
-        n = write_video(path, skel, steps, spec, framing, fps, tick)
-    click.echo(f"{path}: {n} frames at {fps:g} fps ({len(steps)} recorded steps)")
+    with _progress(frames) as tick:
+        return write_video(path, skel, steps, spec, framing, fps, tick)
 
 
 @contextlib.contextmanager

@@ -11,6 +11,7 @@ from pathlib import Path
 import click
 
 from puppetcli.bench.stress import CASES, RANDOM, RANDOM_SEEDS, CaseResult, run_cases
+from puppetcli.commands.report import JSON_OPTION, emit, rows_json
 from puppetcli.outputs import write_text_atomic
 from puppetcli.rig.load import SOLVER_METHODS
 
@@ -40,6 +41,7 @@ from puppetcli.rig.load import SOLVER_METHODS
     type=click.Path(dir_okay=False, path_type=Path),
     help="Also write the table as CSV (replaced if it exists).",
 )
+@JSON_OPTION
 @click.pass_context
 def command(
     ctx: click.Context,
@@ -47,6 +49,7 @@ def command(
     seed: int | None,
     method: str | None,
     csv_path: Path | None,
+    as_json: bool,
 ) -> None:
     """Simulate extreme rigs and inputs and check that each stays stable.
 
@@ -66,10 +69,11 @@ def command(
     runs = sum(n != RANDOM for n in chosen) + (len(seeds) if RANDOM in chosen else 0)
     with _progress(runs) as tick:
         results = run_cases(chosen, seeds, tick, method)
-    click.echo(format_table(results))
     if csv_path is not None:
         write_text_atomic(csv_path, csv_text(results))
-    if not all(r.stable for r in results):
+    stable = all(r.stable for r in results)
+    emit({"ok": stable, "cases": rows_json(results)}, [format_table(results)])
+    if not stable:
         ctx.exit(1)
 
 

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from puppetcli.errors import ScriptError
+from puppetcli.errors import Interrupted, ScriptError
 from puppetcli.run.keyframes import KeyframeSet
 from puppetcli.run.snapshot import capture, push_input
 from puppetcli.run.trace import RunTrace
@@ -90,7 +90,7 @@ class RunResult:
     expectations: list[ExpectResult] = field(default_factory=list)
     peak_force: float = 0.0
     peak_displayed: float = 0.0
-    error: SimulationError | None = None
+    error: SimulationError | Interrupted | None = None
 
 
 def script_model(model: Model, script: Script) -> Model:
@@ -151,6 +151,8 @@ class Runner:
                 self.advance(self.script.duration - self.sim.time)
         except SimulationError as exc:
             error = exc
+        except KeyboardInterrupt:  # Ctrl-C: the run ends here; its keys and trace are kept
+            error = Interrupted(self.sim.steps, self.sim.time)
         if self.trace is not None:
             self.trace.flush()  # the trace's last steps are part of the run's time
         return RunResult(

@@ -38,7 +38,8 @@ def capture(model: Model, state: State, label: str, extra: dict) -> Keyframe:
         name: BonePose(head=heads[i], rotation=_canonical(rotation[i]), local=_canonical(local[i]))
         for i, name in enumerate(model.bone_names)
     }
-    return Keyframe(time=state.time, label=label, bones=bones, extra=extra)
+    # The step grid's time, not the sum of the steps' floats: 2.0, not 1.9999999999999793.
+    return Keyframe(time=round(state.time, 9), label=label, bones=bones, extra=extra)
 
 
 def _canonical(q: np.ndarray) -> np.ndarray:

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 from fuzz_harness import run_cli
-from fuzz_kinds import KINDS, Seeds
+from fuzz_kinds import KINDS, Seeds, changed_outputs, plant_outputs
 
 
 def main() -> None:
@@ -28,7 +28,11 @@ def main() -> None:
                 folder = Path(tmp) / f"{name}-{i}"
                 folder.mkdir()
                 args = KINDS[name](seeds, rng, folder)
+                plant_outputs(folder)
                 outcome = run_cli(args, bound=60)
+                lost = changed_outputs(folder) if outcome.keeps_outputs() else []
+                if lost:
+                    print(f"{name} {i}: a failed run changed {lost}: {outcome.stderr[-200:]!r}")
                 if only is not None:
                     _show(outcome)
                 codes[outcome.code] += 1

@@ -33,6 +33,14 @@ class Outcome:
     warnings: list[str] = field(default_factory=list)
     seconds: float = 0.0
 
+    def keeps_outputs(self) -> bool:
+        """Whether the run must have left existing outputs as they were: it failed, and not
+        in the simulation or its expectations (those save what was captured, as documented)."""
+        if self.code == 0:
+            return False
+        saved = ("simulation failed at", "expectations failed", "expectation failed")
+        return not any(word in self.stderr for word in saved)
+
     def problems(self) -> list[str]:
         """What is wrong with this outcome for a user (empty: it is fine)."""
         out = []

@@ -70,6 +70,30 @@ class Seeds:
         )  # fmt: skip
 
 
+# Every output a case may write, planted before the run: a failed run must leave them as they were.
+OUTPUTS = (
+    "out/keyframes.json", "out/keyframes.bvh", "out/trace.mcap", "out/sheet.png",
+    "out/keys/000.png", "o.bvh", "s.mcap", "s.png", "v.avi", "r.yaml",
+)  # fmt: skip
+
+
+def plant_outputs(folder: Path) -> None:
+    """Write a sentinel into every output path of a case's folder."""
+    for name in OUTPUTS:
+        path = folder / name
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_bytes(f"sentinel {name}".encode())
+
+
+def changed_outputs(folder: Path) -> list[str]:
+    """The planted outputs that a run replaced, changed or removed."""
+    return [
+        name for name in OUTPUTS
+        if not (folder / name).is_file()
+        or (folder / name).read_bytes() != f"sentinel {name}".encode()
+    ]  # fmt: skip
+
+
 def _pick(rng: np.random.Generator, options: list):
     return options[int(rng.integers(len(options)))]
 
