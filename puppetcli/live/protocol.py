@@ -200,7 +200,7 @@ def frame(live: rec.LiveRecording, clock: RealTimeClock, seq: int, ack: int, rej
         "solver": "" if report is None else report.solver,
     }  # fmt: skip
     return {
-        "type": "frame", "seq": seq, "t": s.time,
+        "type": "frame", "seq": seq, "t": round(s.time, 9),
         "body_pos": _floats(s.body_pos), "body_quat": _floats(s.body_quat),
         "pointer": {"pos": list(live.filter.pos), "quat": list(live.filter.quat)},
         "target": {"pos": list(live.target[0]), "quat": list(live.target[1])},

@@ -201,7 +201,7 @@ def render_keys(
     All pictures share one framing.  Numbered PNGs in ``outdir/keys`` beyond the
     last key (left by an earlier run with more keys) are removed, so the folder
     matches the keys.  Existing files are overwritten: the caller applies the
-    output policy (``--force``).
+    output policy (``--force``).  Every picture is drawn before the first is written.
     """
     poses = poses_from_keys(skel, keys)
     framing = frame_poses(skel, poses, spec, view, size)
@@ -212,9 +212,15 @@ def render_keys(
     except OSError as exc:
         raise RenderError(f"{keydir}: cannot create directory: {exc.strerror}") from exc
     names = [f"{i:03d}.png" for i in range(1, len(panels) + 1)]
+    sheet = contact_sheet(panels, default_cols(len(panels)))
     for name, panel in zip(names, panels, strict=True):
         write_png(keydir / name, panel)
+    remove_stale_keys(keydir, names)
+    write_png(Path(outdir) / "sheet.png", sheet)
+
+
+def remove_stale_keys(keydir: Path, names: list[str]) -> None:
+    """Remove numbered PNGs in ``keydir`` that are not among ``names`` (an earlier run's)."""
     for stale in sorted(keydir.iterdir()):
         if _KEY_PNG.fullmatch(stale.name) and stale.name not in names:
             stale.unlink()
-    write_png(Path(outdir) / "sheet.png", contact_sheet(panels, default_cols(len(panels))))

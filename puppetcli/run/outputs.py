@@ -1,16 +1,23 @@
 """What a run's keys become on disk: keyframes.json, keyframes.bvh, keys/NNN.png, sheet.png.
 
 One function for every command that captures keys (``pose`` and ``live``), so their
-output folders have the same layout and the same contents for the same keys.
+output folders have the same layout and the same contents for the same keys.  Every file is
+made in a staging folder inside the output folder first and moved into place only when all
+of them are made: a failure on the way (a render, a BVH) leaves the outputs of an earlier
+run exactly as they were.
 """
 
 from __future__ import annotations
 
+import os
+import shutil
+import tempfile
 from pathlib import Path
 
 from puppetcli.bvh.write import write_keys_bvh
+from puppetcli.outputs import OutputError
 from puppetcli.render.camera import View
-from puppetcli.render.picture import render_keys
+from puppetcli.render.picture import remove_stale_keys, render_keys
 from puppetcli.rig.skeleton import Skeleton
 from puppetcli.run.keyframes import Keyframe, write_keyframes
 from solver.spec import RigSpec
@@ -25,17 +32,49 @@ def write_key_outputs(
     order: str = "ZXY", fps: float = 30.0, scale: float = 1.0, interpolate: str | None = None,
     view: View | str = "iso",
 ) -> list[Path]:  # fmt: skip
-    """Write the keys' files into ``outdir`` (atomically, each); the paths written."""
-    written = [outdir / "keyframes.json"]
-    write_keyframes(written[0], rig_name, keys)
-    if not keys:
-        return written
-    write_keys_bvh(
-        outdir / "keyframes.bvh", Skeleton.from_spec(spec), keys, order,
-        scale=scale, fps=fps, interpolate=interpolate,
-    )  # fmt: skip
-    written.append(outdir / "keyframes.bvh")
-    if render:
-        render_keys(outdir, Skeleton.from_spec(spec), keys, spec, view=view)
-        written += [outdir / "sheet.png", outdir / "keys"]
-    return written
+    """Write the keys' files into ``outdir``, all or none of them; the paths written."""
+    outdir = Path(outdir)
+    stage = _staging_folder(outdir)
+    try:
+        names = ["keyframes.json"]
+        write_keyframes(stage / "keyframes.json", rig_name, keys)
+        if keys:
+            write_keys_bvh(
+                stage / "keyframes.bvh", Skeleton.from_spec(spec), keys, order,
+                scale=scale, fps=fps, interpolate=interpolate,
+            )  # fmt: skip
+            names.append("keyframes.bvh")
+        if keys and render:
+            render_keys(stage, Skeleton.from_spec(spec), keys, spec, view=view)
+            names += ["sheet.png", "keys"]
+        _commit(stage, outdir, names)
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
+    return [outdir / name for name in names]
+
+
+def _staging_folder(outdir: Path) -> Path:
+    try:
+        return Path(tempfile.mkdtemp(prefix=".staging-", dir=outdir))
+    except OSError as exc:
+        raise OutputError(f"{outdir}: cannot write: {exc.strerror or exc}") from None
+
+
+def _commit(stage: Path, outdir: Path, names: list[str]) -> None:
+    """Move the staged outputs into ``outdir`` (renames within one file system)."""
+    for name in names:
+        if name == "keys":
+            (outdir / "keys").mkdir(exist_ok=True)
+            pictures = sorted(p.name for p in (stage / "keys").iterdir())
+            for picture in pictures:
+                _move(stage / "keys" / picture, outdir / "keys" / picture)
+            remove_stale_keys(outdir / "keys", pictures)
+        else:
+            _move(stage / name, outdir / name)
+
+
+def _move(source: Path, target: Path) -> None:
+    try:
+        os.replace(source, target)
+    except OSError as exc:
+        raise OutputError(f"{target}: cannot write: {exc.strerror or exc}") from None
