@@ -12,7 +12,7 @@ import click
 
 from puppetcli.bvh.model import ORDERS
 from puppetcli.errors import PuppetError
-from puppetcli.render.camera import parse_size, parse_view
+from puppetcli.render.camera import VIEWS, parse_size, parse_view
 from puppetcli.rig.load import STEP_RANGE
 from puppetcli.run.warmup import ENGINES
 
@@ -55,8 +55,14 @@ class Parsed(click.ParamType):
     """An option whose text a puppetcli parser reads (``--view``, ``--size``): its error
     becomes click's, so a bad value is a usage error (exit 2) found before any work."""
 
-    def __init__(self, name: str, parse: Callable[[str], Any]) -> None:
-        self.name, self.parse = name, parse
+    def __init__(self, name: str, parse: Callable[[str], Any], choices: tuple[str, ...] = ()):
+        self.name, self.parse, self.choices = name, parse, choices
+
+    def shell_complete(self, ctx, param, incomplete: str):
+        """Shell completion (docs: README, Shell completion): the named values."""
+        from click.shell_completion import CompletionItem
+
+        return [CompletionItem(c) for c in self.choices if c.startswith(incomplete)]
 
     def convert(self, value, param, ctx):
         if not isinstance(value, str):
@@ -67,7 +73,7 @@ class Parsed(click.ParamType):
             self.fail(str(exc).split(": ", 1)[-1] if str(exc).startswith("--") else str(exc))
 
 
-VIEW = Parsed("view", parse_view)
+VIEW = Parsed("view", parse_view, (*VIEWS, "custom:"))
 SIZE = Parsed("size", parse_size)
 
 

@@ -111,21 +111,27 @@ def command(
         check_budget(input_path, what, video_cost(frames, panel), yes)
     facts: dict = {"input": str(input_path), "view": camera_view.name, "size": list(panel)}
     lines = []
-    if sheet is not None:
-        framing = frame_poses(skel, poses, spec, camera_view, panel)
-        ncols = min(cols if cols is not None else default_cols(len(poses)), len(poses))
-        make_parent(sheet)
-        write_png(sheet, contact_sheet([render_pose(skel, p, spec, framing) for p in poses], ncols))
-        rows = -(-len(poses) // ncols)
-        lines.append(f"{sheet}: {len(poses)} panels, {ncols} × {rows}, "
-                     f"{camera_view.name} view, {panel[0]}x{panel[1]} px each")  # fmt: skip
-        facts["sheet"] = {"out": str(sheet), "panels": len(poses), "cols": ncols, "rows": rows}
+    # The video first: it is the long part, and a failure or Ctrl-C there leaves both outputs
+    # as they were.
     if video is not None:
         framing = frame_poses(skel, steps, spec, camera_view, panel)
         n = _video(video, skel, steps, spec, framing, fps, frames)
         lines.append(f"{video}: {n} frames at {fps:g} fps ({len(steps)} recorded steps)")
         facts["video"] = {"out": str(video), "frames": n, "fps": fps, "steps": len(steps)}
+    if sheet is not None:
+        ncols = min(cols if cols is not None else default_cols(len(poses)), len(poses))
+        rows = _sheet(sheet, skel, poses, spec, frame_poses(skel, poses, spec, view, size), ncols)
+        lines.append(f"{sheet}: {len(poses)} panels, {ncols} × {rows}, "
+                     f"{camera_view.name} view, {panel[0]}x{panel[1]} px each")  # fmt: skip
+        facts["sheet"] = {"out": str(sheet), "panels": len(poses), "cols": ncols, "rows": rows}
     emit(facts, lines)
+
+
+def _sheet(path: Path, skel: Skeleton, poses, spec, framing, ncols: int) -> int:
+    """Write the contact sheet of ``poses``; its number of rows."""
+    make_parent(path)
+    write_png(path, contact_sheet([render_pose(skel, p, spec, framing) for p in poses], ncols))
+    return -(-len(poses) // ncols)
 
 
 def _check_request(
