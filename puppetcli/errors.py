@@ -8,8 +8,8 @@ import reprlib
 from solver.errors import PuppetError, SimulationError
 
 __all__ = [
-    "Interrupted", "PuppetError", "RigError", "ScriptError", "SessionError", "SimulationError",
-    "clip", "one_line", "shown",
+    "Interrupted", "OverBudget", "PuppetError", "RigError", "RunStopped", "ScriptError",
+    "SessionError", "SimulationError", "clip", "one_line", "shown",
 ]  # fmt: skip
 
 MAX_LINE = 400  # characters of an error line; a message longer than this is cut in the middle
@@ -31,7 +31,15 @@ class SessionError(PuppetError):
     """A recorded session file is unreadable or invalid."""
 
 
-class Interrupted(PuppetError):
+class RunStopped(PuppetError):
+    """A run stopped before its end; what it captured is saved, as for a broken simulation."""
+
+
+class OverBudget(RunStopped):
+    """A run whose measured pace shows it would take far longer than its budget."""
+
+
+class Interrupted(RunStopped):
     """The user pressed Ctrl-C (SIGINT) during a run: what it captured is saved; status 130."""
 
     exit_code = 130

@@ -3,9 +3,6 @@ write the motion as BVH."""
 
 from __future__ import annotations
 
-import contextlib
-import sys
-from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import click
@@ -19,13 +16,13 @@ from puppetcli.commands.options import (
     order_option,
     scale_option,
 )
-from puppetcli.commands.report import JSON_OPTION, emit
+from puppetcli.commands.report import JSON_OPTION, emit, progress_bar
 from puppetcli.errors import ScriptError
 from puppetcli.mcap.replay import load_replay
 from puppetcli.outputs import make_parent, refuse_overwrite
 from puppetcli.rig.load import load_rig
 from puppetcli.rig.skeleton import Skeleton
-from puppetcli.run.budget import check_budget, run_length, simulation_cost
+from puppetcli.run.budget import BudgetWatch, check_budget, run_length, simulation_cost
 from puppetcli.run.runner import Runner, script_model
 from puppetcli.run.warmup import prepare_engine
 from puppetcli.script.load import load_script
@@ -87,8 +84,8 @@ def command(
     runner = replay.runner(model) if replay is not None else Runner(model, plan)
     runner.upgrade = upgrade
     sampler = FrameSampler(model, fps, runner.state) if fps is not None else None
-    with _progress(round(steps)) as tick:
-        runner.on_step, runner.progress = sampler, tick
+    with progress_bar("simulating", round(steps)) as tick:
+        runner.on_step, runner.progress = sampler, BudgetWatch(source, steps, yes, tick)
         result = runner.run()
     frames = sampler.frames if sampler is not None else list(result.keys)
     if not frames:
@@ -105,13 +102,3 @@ def command(
     emit(facts, [line])
     if result.error is not None:
         raise result.error
-
-
-@contextlib.contextmanager
-def _progress(steps: int) -> Iterator[Callable[[int], None] | None]:
-    """A progress callback: a bar on a terminal's stderr, nothing otherwise."""
-    if not sys.stderr.isatty():
-        yield None
-        return
-    with click.progressbar(length=max(1, steps), label="simulating", file=sys.stderr) as bar:
-        yield bar.update

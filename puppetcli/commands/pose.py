@@ -3,8 +3,8 @@ session, ``.mcap``), write keys and a trace."""
 
 from __future__ import annotations
 
-import contextlib
-import sys
+import functools
+from collections.abc import Callable
 from pathlib import Path
 
 import click
@@ -19,13 +19,13 @@ from puppetcli.commands.options import (
     step_option,
     view_option,
 )
-from puppetcli.commands.report import JSON_OPTION, emit
+from puppetcli.commands.report import JSON_OPTION, emit, progress_bar
 from puppetcli.errors import ScriptError
 from puppetcli.mcap.replay import Replay, load_replay
 from puppetcli.outputs import prepare_outdir
 from puppetcli.render.camera import View
 from puppetcli.rig.load import load_rig
-from puppetcli.run.budget import check_budget, run_length, simulation_cost
+from puppetcli.run.budget import BudgetWatch, check_budget, run_length, simulation_cost
 from puppetcli.run.outputs import write_key_outputs
 from puppetcli.run.runner import Runner, RunResult, script_model
 from puppetcli.run.trace import RunTrace
@@ -123,7 +123,8 @@ def command(
     skipped |= {"sheet.png", "keys"} if no_render else set()
     prepare_outdir(outdir, [name for name in OUTPUTS if name not in skipped], force)
     model, upgrade = prepare_engine(model, engine, rig)
-    result = _run(model, plan, outdir, trace_every, no_trace, replay, upgrade)
+    watch = functools.partial(BudgetWatch, script, steps, yes)
+    result = _run(model, plan, outdir, trace_every, no_trace, replay, upgrade, watch)
     written = write_key_outputs(
         outdir, spec, model.name, list(result.keys), render=not no_render, order=order.upper(),
         fps=fps, scale=scale, interpolate=None if interpolate == "none" else interpolate,
@@ -144,14 +145,14 @@ def command(
 
 
 def _run(
-    model, plan, outdir: Path, trace_every: int, no_trace: bool, replay: Replay | None, upgrade
-) -> RunResult:
-    total = run_length(plan)
-    with _progress(round(total / model.options.h)) as tick:
+    model, plan, outdir: Path, trace_every: int, no_trace: bool, replay: Replay | None, upgrade,
+    watch: Callable[[Callable | None], BudgetWatch],
+) -> RunResult:  # fmt: skip
+    with progress_bar("simulating", round(run_length(plan) / model.options.h)) as tick:
         if replay is not None:
-            runner = replay.runner(model, progress=tick)
+            runner = replay.runner(model, progress=watch(tick))
         else:
-            runner = Runner(model, plan, progress=tick)
+            runner = Runner(model, plan, progress=watch(tick))
         runner.upgrade = upgrade
         if no_trace:
             return runner.run()
@@ -159,16 +160,6 @@ def _run(
         with RunTrace(path, model, plan, trace_every, runner.pointer_on, spidar) as trace:
             runner.trace = trace
             return runner.run()
-
-
-@contextlib.contextmanager
-def _progress(steps: int):
-    """A progress callback: a bar on a terminal's stderr, nothing otherwise."""
-    if not sys.stderr.isatty():
-        yield None
-        return
-    with click.progressbar(length=max(1, steps), label="simulating", file=sys.stderr) as bar:
-        yield bar.update
 
 
 def _report(result: RunResult, h: float, written: list[Path]) -> None:

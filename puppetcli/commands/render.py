@@ -2,15 +2,13 @@
 
 from __future__ import annotations
 
-import contextlib
-import sys
 import tempfile
 from pathlib import Path
 
 import click
 
 from puppetcli.commands.options import SIZE, YES_OPTION, Number, force_option, view_option
-from puppetcli.commands.report import JSON_OPTION, emit
+from puppetcli.commands.report import JSON_OPTION, emit, progress_bar
 from puppetcli.errors import shown
 from puppetcli.mcap.replay import load_replay, replay_traced
 from puppetcli.mcap.session import is_session
@@ -188,15 +186,5 @@ def _video(path: Path, skel, steps, spec, framing, fps: float, frames: int) -> i
     from puppetcli.render.video import write_video
 
     make_parent(path)
-    with _progress(frames) as tick:
-        return write_video(path, skel, steps, spec, framing, fps, tick)
-
-
-@contextlib.contextmanager
-def _progress(frames: int):
-    """A progress callback: a bar on a terminal's stderr, nothing otherwise."""
-    if not sys.stderr.isatty():
-        yield None
-        return
-    with click.progressbar(length=max(1, frames), label="rendering", file=sys.stderr) as bar:
-        yield lambda: bar.update(1)
+    with progress_bar("rendering", frames) as tick:
+        return write_video(path, skel, steps, spec, framing, fps, tick and (lambda: tick(1)))

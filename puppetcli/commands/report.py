@@ -5,15 +5,18 @@ not printed).  A command that fails with ``--json`` still prints one document,
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
+import sys
+from collections.abc import Callable, Iterator
 from typing import Any
 
 import click
 
 from puppetcli.jsontext import json_text, plain
 
-__all__ = ["JSON_OPTION", "emit", "emit_failure", "rows_json"]
+__all__ = ["JSON_OPTION", "emit", "emit_failure", "progress_bar", "rows_json"]
 
 _WANTED, _DONE = "puppetcli.json", "puppetcli.json_done"
 
@@ -63,3 +66,14 @@ def emit_failure(ctx: click.Context, message: str, exit_code: int) -> None:
     document with its own ``error`` field, as ``pose`` prints for a broken run)."""
     if ctx.meta.get(_WANTED) and not ctx.meta.get(_DONE):
         click.echo(json_text({"ok": False, "error": message, "exit_code": exit_code}), nl=False)
+
+
+@contextlib.contextmanager
+def progress_bar(label: str, length: int) -> Iterator[Callable[[int], None] | None]:
+    """A progress callback taking a count: a bar on a terminal's stderr, None otherwise (long
+    work stays quiet in pipes and logs)."""
+    if not sys.stderr.isatty():
+        yield None
+        return
+    with click.progressbar(length=max(1, length), label=label, file=sys.stderr) as bar:
+        yield bar.update

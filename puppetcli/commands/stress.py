@@ -2,16 +2,14 @@
 
 from __future__ import annotations
 
-import contextlib
 import csv
 import io
-import sys
 from pathlib import Path
 
 import click
 
 from puppetcli.bench.stress import CASES, RANDOM, RANDOM_SEEDS, CaseResult, run_cases
-from puppetcli.commands.report import JSON_OPTION, emit, rows_json
+from puppetcli.commands.report import JSON_OPTION, emit, progress_bar, rows_json
 from puppetcli.outputs import write_text_atomic
 from puppetcli.rig.load import SOLVER_METHODS
 
@@ -67,24 +65,14 @@ def command(
         raise click.UsageError("--seed selects a random rig: use it with --case random")
     seeds = [seed] if seed is not None else list(range(RANDOM_SEEDS))
     runs = sum(n != RANDOM for n in chosen) + (len(seeds) if RANDOM in chosen else 0)
-    with _progress(runs) as tick:
-        results = run_cases(chosen, seeds, tick, method)
+    with progress_bar("stress", runs) as tick:
+        results = run_cases(chosen, seeds, tick and (lambda: tick(1)), method)
     if csv_path is not None:
         write_text_atomic(csv_path, csv_text(results))
     stable = all(r.stable for r in results)
     emit({"ok": stable, "cases": rows_json(results)}, [format_table(results)])
     if not stable:
         ctx.exit(1)
-
-
-@contextlib.contextmanager
-def _progress(runs: int):
-    """A progress callback: a bar on a terminal's stderr, nothing otherwise."""
-    if not sys.stderr.isatty():
-        yield None
-        return
-    with click.progressbar(length=runs, label="stress", file=sys.stderr) as bar:
-        yield lambda: bar.update(1)
 
 
 def format_table(results: list[CaseResult]) -> str:

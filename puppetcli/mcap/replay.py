@@ -175,14 +175,15 @@ def session_script(session: Session, track: DeviceTrack, spec: RigSpec) -> Scrip
     if pointer.get("radius") is not None:
         doc["pointer"] = {"radius": pointer["radius"]}
     try:
-        text = json.dumps(doc, allow_nan=False)
-        script = script_from_text(text, where, spec)
-        duration = s.get("duration") or 0.0
-        duration = max(_setting_number(where, "duration", duration), session.end_time)
-    except (TypeError, ValueError, RecursionError, ScriptError) as exc:
+        script = script_from_text(json.dumps(doc, allow_nan=False), where, spec)
+    except ScriptError as exc:  # "FILE: metadata.settings:1: pointer.radius: expected …"
+        raise SessionError(str(exc)) from None
+    except (TypeError, ValueError, RecursionError) as exc:
         raise SessionError(
             f"{where}: expected the run settings of docs/sessions.md, got {shown(str(exc))}"
         ) from None
+    duration = _setting_number(where, "duration", s.get("duration") or 0.0)
+    duration = max(duration, session.end_time)
     return replace(
         script, duration=duration or None, pointer_start=frozen_vector(track.world_pos[0]),
         workspace_offset=frozen_vector(session.workspace.offset),

@@ -15,12 +15,14 @@ from __future__ import annotations
 
 import math
 import os
+import time
 
-from puppetcli.errors import PuppetError, shown
+from puppetcli.errors import OverBudget, PuppetError, shown
 
-__all__ = ["LIMIT", "check_budget", "run_length", "simulation_cost", "video_cost"]
+__all__ = ["LIMIT", "BudgetWatch", "check_budget", "run_length", "simulation_cost", "video_cost"]
 
 LIMIT = 600.0  # s of estimated wall time a command runs without --yes (default)
+WATCH_AFTER = 5.0  # s of a run before its pace is trusted
 SECONDS_PER_BONE_STEP = 1.7e-6  # compiled step: 1 / (31,000 steps/s × 19 bones)
 SECONDS_PER_TRACED_STEP = 5.7e-4  # one step written to trace.mcap (1 / 1,760 steps/s)
 SECONDS_PER_TICK = 4e-4  # one 1 kHz device tick written to a session (1 / 2,500 ticks/s)
@@ -38,6 +40,34 @@ def simulation_cost(steps: float, bones: int, traced_steps: float = 0.0) -> floa
     """Estimated wall seconds of ``steps`` physics steps of a rig of ``bones`` bones, of which
     ``traced_steps`` are written to a trace."""
     return steps * bones * SECONDS_PER_BONE_STEP + traced_steps * SECONDS_PER_TRACED_STEP
+
+
+class BudgetWatch:
+    """A run's progress callback that stops it (``OverBudget``, caught by the runner, which
+    saves what the run captured) when its measured pace, after WATCH_AFTER s, projects more
+    than twice the budget: the estimate cannot see every cost (stiff joints take up to 64
+    substeps a step).  ``then``: the callback it wraps (a progress bar), or None."""
+
+    def __init__(self, source: object, total_steps: float, yes: bool, then=None) -> None:
+        self.source, self.total, self.yes, self.then = source, max(total_steps, 1.0), yes, then
+        self.done, self.start = 0, time.perf_counter()
+
+    def __call__(self, steps: int) -> None:
+        if self.then is not None:
+            self.then(steps)
+        self.done += steps
+        if self.yes:
+            return
+        elapsed = time.perf_counter() - self.start
+        projected = elapsed * self.total / self.done
+        if elapsed >= WATCH_AFTER and projected > 2.0 * _limit():
+            rate = self.done / elapsed
+            raise OverBudget(
+                f"{self.source}: stopped after {self.done:,} of {self.total:,.0f} steps: at the "
+                f"measured {rate:,.0f} steps/s the run would take about {_duration(projected)}, "
+                f"over {_duration(_limit())}; what it captured is saved; pass --yes to run it "
+                f"to the end"
+            )
 
 
 def video_cost(frames: int, size: tuple[int, int]) -> float:

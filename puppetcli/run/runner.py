@@ -25,7 +25,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from puppetcli.errors import Interrupted, ScriptError
+from puppetcli.errors import Interrupted, RunStopped, ScriptError
 from puppetcli.run.keyframes import KeyframeSet
 from puppetcli.run.snapshot import capture, push_input
 from puppetcli.run.trace import RunTrace
@@ -51,6 +51,7 @@ from solver.rows.grip import (
 from solver.state import State, StepInput, initial_state
 
 POINTER_ACTIONS = (Grip, Move, Rotate, Twist, Release, Touch)
+BATCH = 1024  # steps of a batch between progress calls (the run budget's watch reads them)
 EVENT_SLACK = 1e-9  # s: an event "at" a step boundary despite float rounding of the time
 
 
@@ -90,7 +91,7 @@ class RunResult:
     expectations: list[ExpectResult] = field(default_factory=list)
     peak_force: float = 0.0
     peak_displayed: float = 0.0
-    error: SimulationError | Interrupted | None = None
+    error: SimulationError | RunStopped | None = None
 
 
 def script_model(model: Model, script: Script) -> Model:
@@ -106,7 +107,7 @@ def script_model(model: Model, script: Script) -> Model:
 class Runner:
     """Steps a model through a script."""
 
-    batch_steps = True  # a timed action's steps may run as one batch (``_batched``)
+    batch_steps = True  # a timed action's steps may run in batches (``_batched``)
 
     def __init__(
         self,
@@ -149,7 +150,7 @@ class Runner:
                 self.act(action)
             if self.script.duration is not None:
                 self.advance(self.script.duration - self.sim.time)
-        except SimulationError as exc:
+        except (SimulationError, RunStopped) as exc:
             error = exc
         except KeyboardInterrupt:  # Ctrl-C: the run ends here; its keys and trace are kept
             error = Interrupted(self.sim.steps, self.sim.time)
@@ -297,7 +298,8 @@ class Runner:
         poses = pointer_path(self.motion, np.array(starts + [t]), h) if self.pointer_on else None
         for k in range(len(starts)):
             if self._batched(push):  # from here on, every input is known
-                self._run_batch(poses, k, len(starts))
+                for first in range(k, len(starts), BATCH):  # progress between batches
+                    self._run_batch(poses, first, min(first + BATCH, len(starts)))
                 return
             inp = self._input(push, poses, k)
             sim.advance(inp)

@@ -1,4 +1,4 @@
-"""A fuzz campaign from the command line: ``python tests/puppetcli/fuzz/campaign.py KIND N
+"""A fuzz campaign from the command line: ``python tests/puppetcli/robustness/campaign.py KIND N
 [SEED]`` runs N mutants of one input kind (or ``all``) and prints every problem found."""
 
 from __future__ import annotations

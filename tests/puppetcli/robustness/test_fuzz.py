@@ -7,7 +7,7 @@ most one ``error:`` line of printable text and bounded length, exit status 0, 1 
 failed run (other than a broken simulation or a failed expectation, which save what they
 captured) leaves every pre-existing output byte for byte as it was.
 
-``python tests/puppetcli/fuzz/campaign.py KIND N SEED`` runs a longer campaign by hand."""
+``python tests/puppetcli/robustness/campaign.py KIND N SEED`` runs a longer campaign by hand."""
 
 from __future__ import annotations
 
