@@ -164,7 +164,8 @@ BAD = [
     (_replace("tension: {min: 0.3, max: 20.0}", "tension: {min: 0.3}"),
      r"^dev.yaml:3: tension: expected a value for 'max', got no 'max' key$"),
     (_replace("metres_per_count: 1.66555e-05", "metres_per_count: 0"),
-     r"^dev.yaml:7: strings\[0\].metres_per_count: expected a non-zero number .*, got 0$"),
+     r"^dev.yaml:7: strings\[0\].metres_per_count: expected a number of magnitude at least "
+     r"1e-09 .*, got 0$"),
     (_replace("metres_per_count: 1.66555e-05", "metre_per_count: 1.66555e-05"),
      r"^dev.yaml:7: strings\[0\].metre_per_count: expected one of the keys .*"
      r"\(did you mean 'metres_per_count'\?\)$"),
