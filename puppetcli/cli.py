@@ -55,6 +55,12 @@ class LazyGroup(click.Group):
         with formatter.section("Commands"):
             formatter.write_dl([(name, HELP[name]) for name in COMMANDS])
 
+    def parse_args(self, ctx: click.Context, args: list[str]) -> list[str]:
+        try:
+            return super().parse_args(ctx, args)
+        except click.UsageError as exc:  # `puppetcli --bogus`: the same one line as a command's
+            _fail(ctx, f"{one_line(exc.format_message())} (see '{ctx.command_path} --help')", 2)
+
     def invoke(self, ctx: click.Context):
         try:
             return super().invoke(ctx)
