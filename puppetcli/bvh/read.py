@@ -119,7 +119,7 @@ def _open_brace(lines: _Lines, opened: bool, what: str) -> None:
             lines.fail(f"'{{' opening {what}", _show(" ".join(tokens)))
 
 
-MAX_DEPTH = 200  # nested joints; real skeletons nest a few dozen (fingers of a full body ~ 12)
+MAX_DEPTH = 512  # nested joints (a rig has at most 512 bones); real skeletons nest a few dozen
 
 
 @dataclass

@@ -47,7 +47,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from puppetcli.bvh.model import Bvh, BvhError
-from puppetcli.rig.load import rig_from_text
+from puppetcli.rig.load import MAX_BONES, rig_from_text
 from solver.model import build_model
 
 __all__ = ["AUTO_SCALE_HEIGHT", "auto_scale", "check_frame", "describe_scale", "rig_text_from_bvh"]
@@ -98,6 +98,11 @@ def rig_text_from_bvh(
     bvh: Bvh, name: str, scale: float, frame: int | None = None, note: str = ""
 ) -> str:
     """Rig YAML for ``bvh`` (see the module docstring), checked by the rig loader."""
+    if len(bvh.joints) > MAX_BONES:
+        raise BvhError(
+            f"{bvh.source}: expected at most {MAX_BONES} joints (a rig's limit), "
+            f"got {len(bvh.joints):,}"
+        )
     check_frame(bvh, frame)
     bones = _bones(bvh, frame, scale)
     first = _yaml(name, bones, {}, note)

@@ -86,7 +86,7 @@ def bvh_text(
         raise ValueError(f"frame time must be positive and finite, got {shown(frame_time)}")
     bones = _depth_first(skel.parents)
     lines = ["HIERARCHY"]
-    _joint_lines(skel, bones[0], order, scale, bvh_names(skel.names), lines, 0)
+    _joint_lines(skel, bones[0], order, scale, bvh_names(skel.names), lines)
     lines += ["MOTION", f"Frames: {len(keys)}", f"Frame Time: {_frame_time(frame_time)}"]
     lines += [" ".join(row) for row in _frame_rows(skel, bones, keys, order, scale)]
     return "\n".join(lines) + "\n"
@@ -124,30 +124,32 @@ def _depth_first(parents: np.ndarray) -> list[int]:
 
 
 def _joint_lines(
-    skel: Skeleton,
-    i: int,
-    order: str,
-    scale: float,
-    names: tuple[str, ...],
-    lines: list[str],
-    depth: int,
+    skel: Skeleton, root: int, order: str, scale: float, names: tuple[str, ...], lines: list[str]
 ) -> None:
-    """The ROOT/JOINT block of bone ``i`` and its subtree."""
-    pad = "\t" * depth
-    p = int(skel.parents[i])
-    offset = np.zeros(3) if p < 0 else (skel.head0[i] - skel.head0[p]) * scale
+    """The ROOT block of bone ``root`` and its subtree, nested JOINT blocks depth first (an
+    explicit stack: a chain of any length costs no recursion)."""
+    children: dict[int, list[int]] = {}
+    for c, p in enumerate(skel.parents):
+        children.setdefault(int(p), []).append(c)
     rotations = " ".join(f"{axis}rotation" for axis in order)
-    channels = f"6 Xposition Yposition Zposition {rotations}" if p < 0 else f"3 {rotations}"
-    lines += [f"{pad}{'ROOT' if p < 0 else 'JOINT'} {names[i]}", f"{pad}{{"]
-    lines += [f"{pad}\tOFFSET {_lengths(offset)}", f"{pad}\tCHANNELS {channels}"]
-    children = [c for c in range(len(skel.names)) if skel.parents[c] == i]
-    for c in children:
-        _joint_lines(skel, c, order, scale, names, lines, depth + 1)
-    if not children:
-        tip = (skel.tail0[i] - skel.head0[i]) * scale
-        lines += [f"{pad}\tEnd Site", f"{pad}\t{{", f"{pad}\t\tOFFSET {_lengths(tip)}"]
-        lines.append(f"{pad}\t}}")
-    lines.append(f"{pad}}}")
+    stack = [(root, 0, False)]
+    while stack:
+        i, depth, closing = stack.pop()
+        pad = "\t" * depth
+        if closing:
+            if not children.get(i):
+                tip = (skel.tail0[i] - skel.head0[i]) * scale
+                lines += [f"{pad}\tEnd Site", f"{pad}\t{{", f"{pad}\t\tOFFSET {_lengths(tip)}"]
+                lines.append(f"{pad}\t}}")
+            lines.append(f"{pad}}}")
+            continue
+        p = int(skel.parents[i])
+        offset = np.zeros(3) if p < 0 else (skel.head0[i] - skel.head0[p]) * scale
+        channels = f"6 Xposition Yposition Zposition {rotations}" if p < 0 else f"3 {rotations}"
+        lines += [f"{pad}{'ROOT' if p < 0 else 'JOINT'} {names[i]}", f"{pad}{{"]
+        lines += [f"{pad}\tOFFSET {_lengths(offset)}", f"{pad}\tCHANNELS {channels}"]
+        stack.append((i, depth, True))
+        stack.extend((c, depth + 1, False) for c in reversed(children.get(i, [])))
 
 
 def _frame_rows(

@@ -76,6 +76,7 @@ def rig_from_text(text: str, source: str) -> RigSpec:
     return _rig_from_document(load_text(text, source, RigError))
 
 
+MAX_BONES = 512  # a full-body skeleton with fingers and face has a few hundred at most
 STEP_RANGE = (1e-5, 0.1)  # s: a physics step outside this is a mistake (rig, script, --h)
 
 
@@ -234,6 +235,9 @@ def _read_bones(
     items = node.items("a non-empty list of bones")
     if not items:
         node.fail("a non-empty list of bones")
+    if len(items) > MAX_BONES:
+        node.fail(f"at most {MAX_BONES} bones (a step's memory grows as the bones squared: "
+                  f"1,000 took 5 GB)", got=f"{len(items):,} bones")  # fmt: skip
     entries: list[_BoneEntry] = []
     seen: dict[str, Node] = {}
     for item in items:

@@ -67,13 +67,33 @@ def deep_bvh(levels: int) -> str:
 
 
 def test_a_bvh_nested_deeper_than_any_skeleton_is_one_line(tmp_path: Path) -> None:
-    """20,000 nested joints once recursed until RecursionError; 200 levels still read."""
+    """20,000 nested joints once recursed until RecursionError; a chain of 512 (the most
+    bones a rig may have) is read, made a rig, written back as BVH and read again."""
     path = tmp_path / "deep.bvh"
     path.write_text(deep_bvh(20_000))
     line = one_error(run_cli(["rig", "from-bvh", str(path), "-o", str(tmp_path / "r.yaml")]), 1)
-    assert "expected joints nested at most 200 deep" in line
-    path.write_text(deep_bvh(199))
+    assert "expected joints nested at most 512 deep" in line
+    path.write_text(deep_bvh(511))
     assert run_cli(["rig", "from-bvh", str(path), "-o", str(tmp_path / "r.yaml")]).code == 0
+    script = tmp_path / "s.yaml"
+    script.write_text("actions:\n  - key: a\n  - wait: 0.01\n  - key: b\n")
+    out = tmp_path / "out"
+    posed = run_cli(["pose", str(tmp_path / "r.yaml"), str(script), "-o", str(out),
+                     "--no-render", "--no-trace"])  # fmt: skip
+    assert posed.code == 0, posed.stderr
+    again = run_cli(["rig", "from-bvh", str(out / "keyframes.bvh"), "-o", str(tmp_path / "2.yaml")])
+    assert again.code == 0 and "512 bones" in again.stdout, again.stderr
+
+
+def test_a_rig_of_thousands_of_bones_is_refused_before_it_fills_the_memory(tmp_path: Path):
+    """1,000 bones took 5 GB in the step's dense solves and 3,000 were killed for memory."""
+    bones = [f"  - {{name: b{i}{f', parent: b{i - 1}' if i else ''}, head: [0, {i}, 0], "
+             f"tail: [0, {i + 1}, 0]}}" for i in range(1000)]  # fmt: skip
+    rig = tmp_path / "long.yaml"
+    rig.write_text("name: long\nroot: fixed\nbones:\n" + "\n".join(bones) + "\n")
+    line = one_error(run_cli(["validate", str(rig)]), 1)
+    assert line.startswith(f"error: {rig}:4: bones: expected at most 512 bones (")  # the list
+    assert line.endswith("got 1,000 bones")
 
 
 def test_a_bvh_declaring_billions_of_frames_is_refused_before_allocating(tmp_path: Path):
