@@ -47,6 +47,7 @@ COMPILING = (
     "compiling the solver: the first run on this machine takes 2-3 minutes "
     "(later runs load it in under a second)"
 )
+FIRST_STEP = "the first step is taking a while (a large rig, or the solver loading from its cache)"
 COMPILING_NUMPY = "compiling the kernels the numpy solver shares with the compiled one (seconds)"
 NUMPY_READY = "numpy solver ready"
 BUILDING = (
@@ -104,8 +105,8 @@ def prepare_engine(model, engine: str, rig: Path) -> tuple:
     if engine == "numpy":
         warm_up(lambda: first_step(numpy), COMPILING_NUMPY, NUMPY_READY)
         chosen, upgrade = numpy, None
-    elif compiled_ready():
-        warm_up(lambda: first_step(compiled))
+    elif compiled_ready():  # built: a slow first step is the rig's, not a compile
+        warm_up(lambda: first_step(compiled), FIRST_STEP, "first step done")
         start_daemon(rig)
         chosen, upgrade = compiled, None
     elif engine == "compiled":

@@ -29,6 +29,21 @@ def test_a_long_preparation_is_announced_once(monkeypatch, capsys):
     assert err[0] == warmup.COMPILING and err[1].startswith("solver ready (") and len(err) == 2
 
 
+def test_a_slow_first_step_of_a_built_solver_is_not_called_a_compile(monkeypatch, capsys):
+    """With the compiled step built, a long first step (a 512-bone rig's) says so, not
+    "compiling the solver"."""
+    monkeypatch.setattr(warmup, "NOTICE_AFTER", 0.05)
+    monkeypatch.setattr(warmup, "compiled_ready", lambda: True)
+    monkeypatch.setattr(warmup, "first_step", lambda model: time.sleep(0.3))
+    monkeypatch.setattr(warmup, "start_daemon", lambda rig: None)
+    monkeypatch.setattr(warmup, "freeze_loaded", lambda: None)
+    model = build_model(load_rig(ROOT / "rigs/one_bone.yaml"))
+    chosen, upgrade = warmup.prepare_engine(model, "auto", ROOT / "rigs/one_bone.yaml")
+    err = capsys.readouterr().err.splitlines()
+    assert err[0] == warmup.FIRST_STEP and err[1].startswith("first step done (")
+    assert chosen.options.engine == "compiled" and upgrade is None
+
+
 def test_a_quick_one_is_silent(monkeypatch, capsys):
     monkeypatch.setattr(warmup, "NOTICE_AFTER", 0.5)
     warmup.warm_up(lambda: None)
