@@ -1,5 +1,7 @@
 """A fuzz campaign from the command line: ``python tests/puppetcli/robustness/campaign.py KIND N
-[SEED]`` runs N mutants of one input kind (or ``all``) and prints every problem found."""
+[SEED] [INDEX]`` runs N mutants of one input kind (or ``all``) and prints every problem found;
+with INDEX, only that mutant, its output and traceback in full.  ``FUZZ_WARNINGS=error`` turns
+a leaked warning into a traceback that shows where it came from."""
 
 from __future__ import annotations
 
