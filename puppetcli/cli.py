@@ -59,7 +59,7 @@ class LazyGroup(click.Group):
         try:
             return super().parse_args(ctx, args)
         except click.UsageError as exc:  # `puppetcli --bogus`: the same one line as a command's
-            _fail(ctx, f"{one_line(exc.format_message())} (see '{ctx.command_path} --help')", 2)
+            _usage(ctx, exc)
 
     def invoke(self, ctx: click.Context):
         try:
@@ -69,8 +69,13 @@ class LazyGroup(click.Group):
         except KeyboardInterrupt:  # Ctrl-C outside a run (a run saves its part and says so)
             _fail(ctx, "interrupted", 130)
         except click.UsageError as exc:  # a bad option or argument: one line too, status 2
-            where = exc.ctx.command_path if exc.ctx is not None else ctx.command_path
-            _fail(ctx, f"{one_line(exc.format_message())} (see '{where} --help')", 2)
+            _usage(ctx, exc)
+
+
+def _usage(ctx: click.Context, exc: click.UsageError) -> NoReturn:
+    """A usage mistake as one line, with the help of the command it concerns; status 2."""
+    where = (exc.ctx or ctx).command_path
+    _fail(ctx, f"{one_line(exc.format_message())} (see '{where} --help')", 2)
 
 
 def _fail(ctx: click.Context, message: str, exit_code: int) -> NoReturn:

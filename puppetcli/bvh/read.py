@@ -24,12 +24,12 @@ from typing import NoReturn
 import numpy as np
 
 from puppetcli.bvh.model import CHANNEL_NAMES, Bvh, BvhError, BvhJoint
+from puppetcli.errors import shown
 from puppetcli.yamldoc import LARGEST, did_you_mean
 
 __all__ = ["bvh_from_text", "read_bvh"]
 
 _CHANNELS_BY_LOWER = {c.lower(): c for c in CHANNEL_NAMES}
-_SHOWN = 40  # characters of a bad token shown in a message
 
 
 def read_bvh(path: Path) -> Bvh:
@@ -51,17 +51,17 @@ def bvh_from_text(text: str, source: str = "<bvh>") -> Bvh:
     lines = _Lines(text, source)
     tokens = lines.next("'HIERARCHY'")
     if tokens[0].upper() != "HIERARCHY":
-        lines.fail("'HIERARCHY' as the first word of the file", _show(tokens[0]))
+        lines.fail("'HIERARCHY' as the first word of the file", shown(tokens[0]))
     tokens = lines.next("'ROOT'")
     if tokens[0].upper() != "ROOT":
-        lines.fail("'ROOT'", _show(tokens[0]))
+        lines.fail("'ROOT'", shown(tokens[0]))
     joints: list[BvhJoint] = []
     _read_joint(lines, tokens, -1, joints)
     tokens = lines.next("'MOTION'")
     if tokens[0].upper() == "ROOT":
         lines.fail("'MOTION' (one ROOT per file)", "a second 'ROOT'")
     if tokens[0].upper() != "MOTION":
-        lines.fail("'MOTION'", _show(tokens[0]))
+        lines.fail("'MOTION'", shown(tokens[0]))
     nframes, frames_line = _read_frame_count(lines)
     frame_time = _read_frame_time(lines)
     nchannels = sum(len(j.channels) for j in joints)
@@ -99,10 +99,6 @@ class _Lines:
         raise BvhError(f"{self.source}:{line or self.line}: expected {expected}, got {got}")
 
 
-def _show(token: str) -> str:
-    return repr(token if len(token) <= _SHOWN else token[: _SHOWN - 3] + "...")
-
-
 def _header(lines: _Lines, tokens: list[str], what: str) -> tuple[str, bool]:
     """(name, brace given on the same line) of a ``ROOT name`` / ``JOINT name`` line."""
     opened = len(tokens) > 1 and tokens[-1] == "{"
@@ -116,7 +112,7 @@ def _open_brace(lines: _Lines, opened: bool, what: str) -> None:
     if not opened:
         tokens = lines.next(f"'{{' opening {what}")
         if tokens != ["{"]:
-            lines.fail(f"'{{' opening {what}", _show(" ".join(tokens)))
+            lines.fail(f"'{{' opening {what}", shown(" ".join(tokens)))
 
 
 MAX_DEPTH = 512  # nested joints (a rig has at most 512 bones); real skeletons nest a few dozen
@@ -158,7 +154,7 @@ def _read_joint(lines: _Lines, tokens: list[str], parent: int, joints: list[BvhJ
                 block.start,
             )  # fmt: skip
         else:
-            lines.fail(closing, _show(" ".join(tokens)))
+            lines.fail(closing, shown(" ".join(tokens)))
 
 
 def _open_joint(lines: _Lines, tokens: list[str], parent: int, joints: list[BvhJoint]) -> _Open:
@@ -180,14 +176,14 @@ def _read_end_site(lines: _Lines, tokens: list[str], owner: str) -> np.ndarray:
     offset = _read_offset(lines, what)
     tokens = lines.next(f"'}}' closing {what}")
     if tokens != ["}"]:
-        lines.fail(f"'}}' closing {what}", _show(" ".join(tokens)))
+        lines.fail(f"'}}' closing {what}", shown(" ".join(tokens)))
     return offset
 
 
 def _read_offset(lines: _Lines, what: str) -> np.ndarray:
     tokens = lines.next(f"'OFFSET x y z' of {what}")
     if tokens[0].upper() != "OFFSET":
-        lines.fail(f"'OFFSET x y z' of {what}", _show(tokens[0]))
+        lines.fail(f"'OFFSET x y z' of {what}", shown(tokens[0]))
     if len(tokens) != 4:
         lines.fail(f"3 numbers after OFFSET of {what}", f"{len(tokens) - 1}")
     return np.array([_number(lines, t) for t in tokens[1:]])
@@ -196,14 +192,14 @@ def _read_offset(lines: _Lines, what: str) -> np.ndarray:
 def _read_channels(lines: _Lines, what: str) -> tuple[str, ...]:
     tokens = lines.next(f"'CHANNELS n ...' of {what}")
     if tokens[0].upper() != "CHANNELS":
-        lines.fail(f"'CHANNELS n ...' of {what}", _show(tokens[0]))
+        lines.fail(f"'CHANNELS n ...' of {what}", shown(tokens[0]))
     if len(tokens) < 2 or not tokens[1].isdigit():
         lines.fail(
-            "a channel count after CHANNELS", _show(tokens[1]) if len(tokens) > 1 else "none"
+            "a channel count after CHANNELS", shown(tokens[1]) if len(tokens) > 1 else "none"
         )
     count, names = int(tokens[1]), tokens[2:]
     if count > len(CHANNEL_NAMES):
-        lines.fail(f"at most {len(CHANNEL_NAMES)} channels", _show(tokens[1]))
+        lines.fail(f"at most {len(CHANNEL_NAMES)} channels", shown(tokens[1]))
     if count != len(names):
         lines.fail(f"{count} channel names after 'CHANNELS {count}'", f"{len(names)}")
     channels: list[str] = []
@@ -211,7 +207,7 @@ def _read_channels(lines: _Lines, what: str) -> tuple[str, ...]:
         channel = _CHANNELS_BY_LOWER.get(name.lower())
         if channel is None:
             hint = did_you_mean(name, CHANNEL_NAMES)
-            lines.fail(f"a channel name (Xposition … Zrotation){hint}", _show(name))
+            lines.fail(f"a channel name (Xposition … Zrotation){hint}", shown(name))
         if channel in channels:
             lines.fail(f"each channel once in {what}", f"{channel} twice")
         channels.append(channel)
@@ -222,11 +218,11 @@ def _number(lines: _Lines, token: str) -> float:
     try:
         value = float(token)
     except ValueError:
-        lines.fail("a number", _show(token))
+        lines.fail("a number", shown(token))
     if not math.isfinite(value):
-        lines.fail("a finite number", _show(token))
+        lines.fail("a finite number", shown(token))
     if abs(value) > LARGEST:
-        lines.fail(f"a number of magnitude at most {LARGEST:g}", _show(token))
+        lines.fail(f"a number of magnitude at most {LARGEST:g}", shown(token))
     return value
 
 
@@ -234,17 +230,17 @@ def _read_frame_count(lines: _Lines) -> tuple[int, int]:
     """(N of ``Frames: N``, its line)."""
     tokens = lines.next("'Frames: N'")
     if tokens[0].lower() != "frames:" or len(tokens) != 2 or not tokens[1].isdigit():
-        lines.fail("'Frames: N' (a whole number of frames)", _show(" ".join(tokens)))
+        lines.fail("'Frames: N' (a whole number of frames)", shown(" ".join(tokens)))
     return int(tokens[1]), lines.line
 
 
 def _read_frame_time(lines: _Lines) -> float:
     tokens = lines.next("'Frame Time: seconds'")
     if [t.lower() for t in tokens[:2]] != ["frame", "time:"] or len(tokens) != 3:
-        lines.fail("'Frame Time: seconds'", _show(" ".join(tokens)))
+        lines.fail("'Frame Time: seconds'", shown(" ".join(tokens)))
     value = _number(lines, tokens[2])
     if value <= 0.0:
-        lines.fail("a positive frame time (seconds per frame)", _show(tokens[2]))
+        lines.fail("a positive frame time (seconds per frame)", shown(tokens[2]))
     return value
 
 
@@ -252,7 +248,7 @@ def _read_frames(lines: _Lines, nframes: int, frames_line: int, nchannels: int) 
     """``nframes`` lines of ``nchannels`` finite numbers each, then the end of the file."""
     left = len(lines.lines) - lines.index  # frames are read by what is there, not declared
     if nframes > left:
-        expected = f"as many frame lines as 'Frames:' says ({_show(str(nframes))})"
+        expected = f"as many frame lines as 'Frames:' says ({shown(str(nframes))})"
         lines.fail(expected, f"at most {left}", line=frames_line)
     frames = np.zeros((nframes, nchannels))
     for f in range(nframes):

@@ -22,7 +22,7 @@ from puppetcli.mcap.replay import load_replay
 from puppetcli.outputs import make_parent, refuse_overwrite
 from puppetcli.rig.load import load_rig
 from puppetcli.rig.skeleton import Skeleton
-from puppetcli.run.budget import BudgetWatch, check_budget, run_length, simulation_cost
+from puppetcli.run.budget import BudgetWatch, check_run
 from puppetcli.run.runner import Runner, script_model
 from puppetcli.run.warmup import prepare_engine
 from puppetcli.script.load import load_script
@@ -77,9 +77,7 @@ def command(
         click.echo(f"warning: {replay.warning}", err=True)
     plan = replay.script if replay is not None else load_script(source, spec)
     model = script_model(build_model(spec), plan)
-    steps = run_length(plan) / model.options.h
-    what = f"{steps:,.0f} steps of h = {model.options.h:g} s, {len(spec.bones)} bones"
-    check_budget(source, what, simulation_cost(steps, len(spec.bones)), yes)
+    steps = check_run(source, plan, model.options.h, len(spec.bones), yes)
     model, upgrade = prepare_engine(model, engine, rig)
     runner = replay.runner(model) if replay is not None else Runner(model, plan)
     runner.upgrade = upgrade

@@ -3,8 +3,6 @@ session, ``.mcap``), write keys and a trace."""
 
 from __future__ import annotations
 
-import functools
-from collections.abc import Callable
 from pathlib import Path
 
 import click
@@ -25,7 +23,7 @@ from puppetcli.mcap.replay import Replay, load_replay
 from puppetcli.outputs import prepare_outdir
 from puppetcli.render.camera import View
 from puppetcli.rig.load import load_rig
-from puppetcli.run.budget import BudgetWatch, check_budget, run_length, simulation_cost
+from puppetcli.run.budget import BudgetWatch, check_run
 from puppetcli.run.outputs import write_key_outputs
 from puppetcli.run.runner import Runner, RunResult, script_model
 from puppetcli.run.trace import RunTrace
@@ -115,16 +113,15 @@ def command(
     model = script_model(build_model(spec), plan)
     if step is not None:
         model = model.with_options(h=step)
-    steps = run_length(plan) / model.options.h
-    traced = 0.0 if no_trace else steps / trace_every
-    what = f"{steps:,.0f} steps of h = {model.options.h:g} s, {len(spec.bones)} bones"
-    check_budget(script, what, simulation_cost(steps, len(spec.bones), traced), yes)
+    steps = check_run(script, plan, model.options.h, len(spec.bones), yes,
+                      trace_every=None if no_trace else trace_every)  # fmt: skip
     skipped = {"trace.mcap"} if no_trace else set()
     skipped |= {"sheet.png", "keys"} if no_render else set()
     prepare_outdir(outdir, [name for name in OUTPUTS if name not in skipped], force)
     model, upgrade = prepare_engine(model, engine, rig)
-    watch = functools.partial(BudgetWatch, script, steps, yes)
-    result = _run(model, plan, outdir, trace_every, no_trace, replay, upgrade, watch)
+    with progress_bar("simulating", round(steps)) as tick:
+        watch = BudgetWatch(script, steps, yes, tick)
+        result = _run(model, plan, outdir, trace_every, no_trace, replay, upgrade, watch)
     written = write_key_outputs(
         outdir, spec, model.name, list(result.keys), render=not no_render, order=order.upper(),
         fps=fps, scale=scale, interpolate=None if interpolate == "none" else interpolate,
@@ -146,20 +143,19 @@ def command(
 
 def _run(
     model, plan, outdir: Path, trace_every: int, no_trace: bool, replay: Replay | None, upgrade,
-    watch: Callable[[Callable | None], BudgetWatch],
+    progress: BudgetWatch,
 ) -> RunResult:  # fmt: skip
-    with progress_bar("simulating", round(run_length(plan) / model.options.h)) as tick:
-        if replay is not None:
-            runner = replay.runner(model, progress=watch(tick))
-        else:
-            runner = Runner(model, plan, progress=watch(tick))
-        runner.upgrade = upgrade
-        if no_trace:
-            return runner.run()
-        path, spidar = outdir / "trace.mcap", replay is not None
-        with RunTrace(path, model, plan, trace_every, runner.pointer_on, spidar) as trace:
-            runner.trace = trace
-            return runner.run()
+    if replay is not None:
+        runner = replay.runner(model, progress=progress)
+    else:
+        runner = Runner(model, plan, progress=progress)
+    runner.upgrade = upgrade
+    if no_trace:
+        return runner.run()
+    path, spidar = outdir / "trace.mcap", replay is not None
+    with RunTrace(path, model, plan, trace_every, runner.pointer_on, spidar) as trace:
+        runner.trace = trace
+        return runner.run()
 
 
 def _report(result: RunResult, h: float, written: list[Path]) -> None:

@@ -13,7 +13,7 @@ from puppetcli.mcap.record import record_session
 from puppetcli.mcap.session import TICK, write_session
 from puppetcli.outputs import make_parent, refuse_overwrite
 from puppetcli.rig.load import load_rig
-from puppetcli.run.budget import SECONDS_PER_TICK, check_budget, run_length, simulation_cost
+from puppetcli.run.budget import check_run
 from puppetcli.run.runner import script_model
 from puppetcli.script.load import load_script
 from puppetcli.spidar import preset_from_option
@@ -67,13 +67,10 @@ def command(
     refuse_overwrite(out, force)
     spec = load_rig(rig)
     plan = load_script(script, spec)
-    h = script_model(build_model(spec), plan).options.h
-    ticks, bones = run_length(plan) / TICK, len(spec.bones)
-    what = f"{ticks:,.0f} device ticks of {TICK * 1e3:g} ms, steps of h = {h:g} s, {bones} bones"
-    seconds = simulation_cost(ticks * TICK / h, bones) + ticks * SECONDS_PER_TICK
-    check_budget(script, what, seconds, yes)
+    model = script_model(build_model(spec), plan)
+    check_run(script, plan, model.options.h, len(spec.bones), yes, tick=TICK)
     session = record_session(
-        spec, plan, preset_from_option(device), noise, seed, store_pose=with_pose
+        model, plan, preset_from_option(device), noise, seed, store_pose=with_pose
     )
     make_parent(out)
     write_session(out, session)

@@ -25,12 +25,7 @@ from puppetcli.render.picture import (
 from puppetcli.render.video import CODECS, frame_count
 from puppetcli.rig.load import load_rig
 from puppetcli.rig.skeleton import Skeleton
-from puppetcli.run.budget import (
-    check_budget,
-    run_length,
-    simulation_cost,
-    video_cost,
-)
+from puppetcli.run.budget import check_budget, check_run, video_cost
 from puppetcli.run.runner import script_model
 from solver.model import build_model
 
@@ -93,7 +88,6 @@ def command(
     one perspective camera fitted to all poses, so they compare directly.
     Existing outputs are kept unless --force.
     """
-    camera_view, panel = view, size
     kind = _check_request(input_path, sheet, video, force)
     spec = load_rig(rig)
     skel = Skeleton.from_spec(spec)
@@ -103,16 +97,16 @@ def command(
         steps, poses = trace_poses(input_path, skel)
     else:
         steps, poses = [], key_poses(input_path, kind, skel)
-    frames = frame_count([p.time for p in steps], fps) if video is not None else 0
     if video is not None:  # refused before anything is written
+        frames = frame_count([p.time for p in steps], fps)
         what = f"{frames:,} video frames at {fps:g} fps"
-        check_budget(input_path, what, video_cost(frames, panel), yes)
-    facts: dict = {"input": str(input_path), "view": camera_view.name, "size": list(panel)}
+        check_budget(input_path, what, video_cost(frames, size), yes)
+    facts: dict = {"input": str(input_path), "view": view.name, "size": list(size)}
     lines = []
     # The video first: it is the long part, and a failure or Ctrl-C there leaves both outputs
     # as they were.
     if video is not None:
-        framing = frame_poses(skel, steps, spec, camera_view, panel)
+        framing = frame_poses(skel, steps, spec, view, size)
         n = _video(video, skel, steps, spec, framing, fps, frames)
         lines.append(f"{video}: {n} frames at {fps:g} fps ({len(steps)} recorded steps)")
         facts["video"] = {"out": str(video), "frames": n, "fps": fps, "steps": len(steps)}
@@ -120,7 +114,7 @@ def command(
         ncols = min(cols if cols is not None else default_cols(len(poses)), len(poses))
         rows = _sheet(sheet, skel, poses, spec, frame_poses(skel, poses, spec, view, size), ncols)
         lines.append(f"{sheet}: {len(poses)} panels, {ncols} × {rows}, "
-                     f"{camera_view.name} view, {panel[0]}x{panel[1]} px each")  # fmt: skip
+                     f"{view.name} view, {size[0]}x{size[1]} px each")  # fmt: skip
         facts["sheet"] = {"out": str(sheet), "panels": len(poses), "cols": ncols, "rows": rows}
     emit(facts, lines)
 
@@ -170,12 +164,10 @@ def _session_poses(path: Path, spec, skel: Skeleton, yes: bool):
     replay = load_replay(path, spec)
     if replay.warning:
         click.echo(f"warning: {replay.warning}", err=True)
-    h = script_model(build_model(spec), replay.script).options.h
-    steps = run_length(replay.script) / h
-    what = f"{steps:,.0f} steps of h = {h:g} s, {len(spec.bones)} bones"
-    check_budget(path, what, simulation_cost(steps, len(spec.bones), steps), yes)
+    model = script_model(build_model(spec), replay.script)
+    check_run(path, replay.script, model.options.h, len(spec.bones), yes, trace_every=1)
     with tempfile.TemporaryDirectory() as tmp:
-        result = replay_traced(replay, spec, Path(tmp) / "trace.mcap")
+        result = replay_traced(replay, model, Path(tmp) / "trace.mcap")
         if result.error is not None:
             raise result.error
         return trace_poses(Path(tmp) / "trace.mcap", skel)

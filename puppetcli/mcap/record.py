@@ -28,14 +28,13 @@ import yaml
 
 from puppetcli.errors import ScriptError
 from puppetcli.mcap.session import TICK, Event, Session, Workspace
-from puppetcli.run.runner import Runner, script_model
+from puppetcli.run.runner import Runner
 from puppetcli.script.actions import Expect, Grip, Move, Release, Rotate, Touch, Twist
 from puppetcli.script.load import DEFAULT_WORKSPACE_SCALE, Key, Push, Script
 from puppetcli.spidar import DeviceError, DevicePreset, check_reachable, counts_from_pose
 from puppetcli.spidar.pointer import Motion, still
 from solver import quat
-from solver.model import Model, build_model
-from solver.spec import RigSpec
+from solver.model import Model
 
 __all__ = ["FIT_FRACTION", "device_reach", "fit_workspace", "record_session"]
 
@@ -159,19 +158,19 @@ def _sample(tape: _Tape, start: Motion, times: np.ndarray) -> tuple[np.ndarray, 
 
 
 def record_session(
-    spec: RigSpec,
+    model: Model,
     script: Script,
     dev: DevicePreset,
     noise: float = 0.0,
     seed: int = 0,
     store_pose: bool = False,
 ) -> Session:
-    """Run ``script`` on the rig and return the session a device ``dev`` would record.
+    """Run ``script`` on ``model`` (the rig's, with the script's settings:
+    ``script_model``) and return the session a device ``dev`` would record.
 
     noise: σ of Gaussian noise added to every count (counts, seeded by ``seed``).
     Raises ``ScriptError`` naming the script line when the pointer path leaves the device.
     """
-    model = script_model(build_model(spec), script)
     tape = _Tape(model)
     runner = tape.runner = Runner(model, script, on_action=tape)
     start = still(np.asarray(script.pointer_start, dtype=float), quat.IDENTITY)

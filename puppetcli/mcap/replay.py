@@ -32,7 +32,7 @@ import numpy as np
 
 from puppetcli.errors import ScriptError, SessionError, shown
 from puppetcli.mcap.session import Event, Session, read_session
-from puppetcli.run.runner import Runner, TouchMode, UndoKey, Until, script_model
+from puppetcli.run.runner import Runner, TouchMode, UndoKey, Until
 from puppetcli.run.trace import RunTrace
 from puppetcli.script.actions import GRIP_DEFAULTS, Expect, Grip, Release, frozen_vector
 from puppetcli.script.load import Key, Push, Script, script_from_text
@@ -47,7 +47,7 @@ from puppetcli.spidar import (
 from puppetcli.spidar.strings import MIN_LENGTH
 from puppetcli.yamldoc import LARGEST, did_you_mean
 from solver import quat, quat1
-from solver.model import Model, build_model
+from solver.model import Model
 from solver.spec import RigSpec
 from solver.state import StepInput
 
@@ -324,10 +324,9 @@ def load_replay(path: Path, spec: RigSpec) -> Replay:
     return Replay(session, session_script(session, track, spec), track)
 
 
-def replay_traced(replay: Replay, spec: RigSpec, trace_path: Path):
-    """Run a loaded session on the rig, tracing every step (and the device's channels) into
-    ``trace_path``: the run's ``RunResult``."""
-    model = script_model(build_model(spec), replay.script)
+def replay_traced(replay: Replay, model: Model, trace_path: Path):
+    """Run a loaded session on ``model`` (the rig's with the session's settings), tracing
+    every step (and the device's channels) into ``trace_path``: the run's ``RunResult``."""
     runner = replay.runner(model)
     with RunTrace(trace_path, model, replay.script, 1, runner.pointer_on, spidar=True) as trace:
         runner.trace = trace

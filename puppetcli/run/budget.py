@@ -24,7 +24,10 @@ import time
 
 from puppetcli.errors import OverBudget, PuppetError, shown
 
-__all__ = ["LIMIT", "BudgetWatch", "check_budget", "run_length", "simulation_cost", "video_cost"]
+__all__ = [
+    "LIMIT", "BudgetWatch", "check_budget", "check_run", "run_length", "simulation_cost",
+    "video_cost",
+]  # fmt: skip
 
 LIMIT = 600.0  # s of estimated wall time a command runs without --yes (default)
 WATCH_AFTER = 5.0  # s of a run before its pace is trusted
@@ -80,6 +83,25 @@ class BudgetWatch:
 def video_cost(frames: int, size: tuple[int, int]) -> float:
     """Estimated wall seconds of drawing and encoding ``frames`` frames of ``size`` pixels."""
     return frames * (SECONDS_PER_VIDEO_FRAME + size[0] * size[1] * SECONDS_PER_VIDEO_PIXEL)
+
+
+def check_run(
+    source: object, plan, h: float, bones: int, yes: bool, *, trace_every: int | None = None,
+    tick: float | None = None,
+) -> float:  # fmt: skip
+    """Refuse (``check_budget``) the run of ``plan`` at step ``h`` on ``bones`` bones, traced
+    every ``trace_every`` steps (None: no trace), recorded as device ticks of ``tick`` s
+    (None: none); the run's number of steps."""
+    steps = run_length(plan) / h
+    traced = steps / trace_every if trace_every else 0.0
+    seconds = simulation_cost(steps, bones, traced)
+    what = f"{steps:,.0f} steps of h = {h:g} s, {bones} bones"
+    if tick is not None:
+        ticks = run_length(plan) / tick
+        seconds += ticks * SECONDS_PER_TICK
+        what = f"{ticks:,.0f} device ticks of {tick * 1e3:g} ms, {what}"
+    check_budget(source, what, seconds, yes)
+    return steps
 
 
 def check_budget(source: object, what: str, seconds: float, yes: bool) -> None:

@@ -137,7 +137,7 @@ def script_case(seeds: Seeds, rng: np.random.Generator, folder: Path) -> list[st
     return ["record", str(seeds.rig), str(script), "-o", str(folder / "s.mcap"), "--force"]
 
 
-def _mcap_messages(path: Path) -> tuple[list, list]:
+def mcap_messages(path: Path) -> tuple[list, list]:
     """The metadata records and the (topic, schema name, log time, message dict) of a file."""
     with path.open("rb") as stream:
         reader = make_reader(stream)
@@ -150,7 +150,9 @@ def _mcap_messages(path: Path) -> tuple[list, list]:
     return metadata, messages
 
 
-def _write_mcap(path: Path, metadata: list, messages: list) -> None:
+def write_mcap(path: Path, metadata: list, messages: list) -> None:
+    """An MCAP file of JSON channels with these metadata records and (topic, schema name, log
+    time, message) messages; a ``deep`` marker in a message is written as nested brackets."""
     with path.open("wb") as stream:
         writer = Writer(stream)
         writer.start(profile="", library="fuzz")
@@ -173,7 +175,7 @@ def _mcap_mutant(path: Path, rng: np.random.Generator, out: Path) -> None:
     if rng.random() < 0.3:
         out.write_bytes(mutate_bytes(path.read_bytes(), rng))
         return
-    metadata, messages = _mcap_messages(path)
+    metadata, messages = mcap_messages(path)
     if rng.random() < 0.3 and metadata:
         _, values = _pick(rng, metadata)
         key = _pick(rng, sorted(values))
@@ -190,7 +192,7 @@ def _mcap_mutant(path: Path, rng: np.random.Generator, out: Path) -> None:
             log_time = _pick(rng, [0, 2**63 - 1, 10**18, log_time * 1000])
             data["t"] = log_time / 1e9
         messages[index] = (topic, schema, log_time, mutate_tree(data, rng))
-    _write_mcap(out, metadata, messages)
+    write_mcap(out, metadata, messages)
 
 
 def session_case(seeds: Seeds, rng: np.random.Generator, folder: Path) -> list[str]:
