@@ -1,5 +1,5 @@
-"""``puppetcli convert INPUT -o OUT.bvh --rig RIG``: run a script (or replay a session),
-write the motion as BVH."""
+"""``puppetcli convert INPUT -o OUT.bvh|OUT.glb --rig RIG``: run a script (or replay a
+session), write the motion as BVH or glTF 2.0."""
 
 from __future__ import annotations
 
@@ -17,7 +17,8 @@ from puppetcli.commands.options import (
     scale_option,
 )
 from puppetcli.commands.report import JSON_OPTION, emit, progress_bar
-from puppetcli.errors import ScriptError
+from puppetcli.errors import ScriptError, shown
+from puppetcli.gltf.write import write_keys_glb
 from puppetcli.mcap.replay import load_replay
 from puppetcli.outputs import make_parent, refuse_overwrite
 from puppetcli.rig.load import load_rig
@@ -35,7 +36,7 @@ KEYS_FPS = 30.0  # Frame Time of a BVH of keys when no --fps is given
 @click.argument("source", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option(
     "-o", "--out", required=True, type=click.Path(dir_okay=False, path_type=Path),
-    help="The BVH file to write.",
+    help="The file to write: .bvh, or .glb (glTF 2.0: the doll, skinned, and the motion).",
 )  # fmt: skip
 @click.option(
     "--rig", "rig", required=True,
@@ -64,12 +65,18 @@ def command(
     as_json: bool,
 ) -> None:
     """Run the manipulation script SOURCE (.yaml), or replay the recorded session SOURCE
-    (.mcap, see docs/sessions.md), on RIG and write its motion as BVH.
+    (.mcap, see docs/sessions.md), on RIG and write its motion as BVH or glTF 2.0
+    (by OUT's suffix, .bvh or .glb).
 
-    Without --fps each key of the script is one frame; with --fps the whole
-    run is sampled at that rate.  If the simulation fails, the frames before
+    Without --fps each key of the script is one frame (a .glb holds each key
+    until the next); with --fps the whole run is sampled at that rate (a .glb
+    interpolates between the samples).  If the simulation fails, the frames before
     the failure are still written and the exit status is 1.
     """
+    if out.suffix.lower() not in (".bvh", ".glb"):
+        raise click.BadParameter(
+            f"expected a .bvh or .glb file name, got {shown(out.name)}", param_hint="'-o'"
+        )
     refuse_overwrite(out, force)
     spec = load_rig(rig)
     replay = load_replay(source, spec) if source.suffix.lower() == ".mcap" else None
@@ -89,9 +96,14 @@ def command(
     if not frames:
         raise ScriptError(f"{source}: expected at least one 'key' action (or --fps), got none")
     make_parent(out)
-    write_keys_bvh(out, Skeleton.from_spec(spec), frames, order.upper(), scale, fps or KEYS_FPS)
+    skel = Skeleton.from_spec(spec)
+    if out.suffix.lower() == ".glb":
+        write_keys_glb(out, skel, frames, model.name, fps or KEYS_FPS, "LINEAR" if fps else "STEP")
+    else:
+        write_keys_bvh(out, skel, frames, order.upper(), scale, fps or KEYS_FPS)
     what = f"{len(frames)} frames at {fps:g} fps" if fps else f"{len(frames)} keys"
-    line = f"wrote {out}: {what}, {result.state.time:.3f} s simulated, order {order.upper()}"
+    line = f"wrote {out}: {what}, {result.state.time:.3f} s simulated"
+    line += f", order {order.upper()}" if out.suffix.lower() == ".bvh" else ""
     facts = {
         "ok": result.error is None, "out": str(out), "frames": len(frames), "fps": fps or KEYS_FPS,
         "per_key": fps is None, "simulated": round(result.state.time, 9), "order": order.upper(),

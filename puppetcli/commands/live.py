@@ -152,7 +152,8 @@ class _Run:
         })  # fmt: skip
         live.close()
         keys = list(live.runner.keys)
-        written = write_key_outputs(self.outdir, self.spec, self.model.name, keys, view=self.view)
+        written = write_key_outputs(self.outdir, self.spec, self.model.name, keys, view=self.view,
+                                    gltf=True)  # fmt: skip
         return [str(self.session), *(str(p) for p in written)]
 
 

@@ -31,7 +31,7 @@ from puppetcli.run.warmup import prepare_engine
 from puppetcli.script.load import load_script
 from solver.model import build_model
 
-OUTPUTS = ["keyframes.json", "keyframes.bvh", "trace.mcap", "sheet.png", "keys"]
+OUTPUTS = ["keyframes.json", "keyframes.bvh", "keyframes.glb", "trace.mcap", "sheet.png", "keys"]
 
 
 @click.command("pose")
@@ -73,6 +73,11 @@ OUTPUTS = ["keyframes.json", "keyframes.bvh", "trace.mcap", "sheet.png", "keys"]
     help="keyframes.bvh: 'slerp' samples a timed motion at --fps between the keys.",
 )
 @scale_option("keyframes.bvh: length unit factor (100 = centimetres).")
+@click.option(
+    "--gltf",
+    is_flag=True,
+    help="Also write keyframes.glb (glTF 2.0: the doll, skinned, with the keys as an animation).",
+)
 @view_option("the pictures")
 @ENGINE_OPTION
 @YES_OPTION
@@ -90,6 +95,7 @@ def command(
     fps: float,
     interpolate: str,
     scale: float,
+    gltf: bool,
     view: View,
     engine: str,
     yes: bool,
@@ -98,7 +104,8 @@ def command(
     """Run a manipulation script (or replay a session .mcap) on a rig: keyframes, BVH, a
     trace and pictures.
 
-    Writes OUTDIR/keyframes.json, OUTDIR/keyframes.bvh (one frame per key),
+    Writes OUTDIR/keyframes.json, OUTDIR/keyframes.bvh (one frame per key), with
+    --gltf OUTDIR/keyframes.glb,
     OUTDIR/trace.mcap, OUTDIR/keys/NNN.png (one picture per key) and
     OUTDIR/sheet.png (all keys, one framing); existing files
     are kept unless --force.  If the simulation fails, the keys taken and the trace
@@ -117,6 +124,7 @@ def command(
                       trace_every=None if no_trace else trace_every)  # fmt: skip
     skipped = {"trace.mcap"} if no_trace else set()
     skipped |= {"sheet.png", "keys"} if no_render else set()
+    skipped |= set() if gltf else {"keyframes.glb"}
     prepare_outdir(outdir, [name for name in OUTPUTS if name not in skipped], force)
     model, upgrade = prepare_engine(model, engine, rig)
     with progress_bar("simulating", round(steps)) as tick:
@@ -125,7 +133,7 @@ def command(
     written = write_key_outputs(
         outdir, spec, model.name, list(result.keys), render=not no_render, order=order.upper(),
         fps=fps, scale=scale, interpolate=None if interpolate == "none" else interpolate,
-        view=view,
+        view=view, gltf=gltf,
     )  # fmt: skip
     if not no_trace:
         written.append(outdir / "trace.mcap")

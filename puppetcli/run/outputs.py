@@ -1,4 +1,5 @@
-"""What a run's keys become on disk: keyframes.json, keyframes.bvh, keys/NNN.png, sheet.png.
+"""What a run's keys become on disk: keyframes.json, keyframes.bvh, keyframes.glb (when asked),
+keys/NNN.png, sheet.png.
 
 One function for every command that captures keys (``pose`` and ``live``), so their
 output folders have the same layout and the same contents for the same keys.  Every file is
@@ -15,6 +16,7 @@ import tempfile
 from pathlib import Path
 
 from puppetcli.bvh.write import write_keys_bvh
+from puppetcli.gltf.write import write_keys_glb
 from puppetcli.outputs import OutputError
 from puppetcli.render.camera import View
 from puppetcli.render.picture import remove_stale_keys, render_keys
@@ -24,15 +26,18 @@ from solver.spec import RigSpec
 
 __all__ = ["KEY_OUTPUTS", "write_key_outputs"]
 
-KEY_OUTPUTS = ["keyframes.json", "keyframes.bvh", "sheet.png", "keys"]
+KEY_OUTPUTS = ["keyframes.json", "keyframes.bvh", "keyframes.glb", "sheet.png", "keys"]
 
 
 def write_key_outputs(
     outdir: Path, spec: RigSpec, rig_name: str, keys: list[Keyframe], *, render: bool = True,
     order: str = "ZXY", fps: float = 30.0, scale: float = 1.0, interpolate: str | None = None,
-    view: View | str = "iso",
+    view: View | str = "iso", gltf: bool = False,
 ) -> list[Path]:  # fmt: skip
-    """Write the keys' files into ``outdir``, all or none of them; the paths written."""
+    """Write the keys' files into ``outdir``, all or none of them; the paths written.
+
+    keyframes.glb (``gltf``) holds the keys as STEP keys at 1/fps apart, or, with
+    ``interpolate="slerp"``, at their own times for viewers to interpolate."""
     outdir = Path(outdir)
     stage = _staging_folder(outdir)
     try:
@@ -44,6 +49,11 @@ def write_key_outputs(
                 scale=scale, fps=fps, interpolate=interpolate,
             )  # fmt: skip
             names.append("keyframes.bvh")
+        if keys and gltf:
+            interpolation = "STEP" if interpolate is None else "LINEAR"
+            write_keys_glb(stage / "keyframes.glb", Skeleton.from_spec(spec), keys, rig_name,
+                           fps, interpolation)  # fmt: skip
+            names.append("keyframes.glb")
         if keys and render:
             render_keys(stage, Skeleton.from_spec(spec), keys, spec, view=view)
             names += ["sheet.png", "keys"]
