@@ -7,7 +7,8 @@ from pathlib import Path
 import click
 
 from puppetcli.bvh.read import read_bvh
-from puppetcli.bvh.rig import auto_scale, check_frame, describe_scale, rig_text_from_bvh
+from puppetcli.bvh.rig import check_frame, rig_text_from_bvh
+from puppetcli.bvh.units import infer_unit
 from puppetcli.commands.options import SCALE, force_option
 from puppetcli.outputs import refuse_overwrite, write_text_atomic
 from puppetcli.rig.load import rig_from_text
@@ -39,7 +40,7 @@ def command() -> None:
     "--scale",
     type=SCALE,
     default=None,
-    help="Metres per file unit [default: 0.01 if the skeleton is taller than 10 units, else 1].",
+    help="Metres per file unit [default: inferred from the skeleton's size, see docs/bvh.md].",
 )
 @force_option("RIG.yaml if it exists")
 def from_bvh(
@@ -56,8 +57,11 @@ def from_bvh(
     bvh = read_bvh(bvh_file)
     check_frame(bvh, frame)
     if scale is None:
-        scale, height = auto_scale(bvh, frame)
-        click.echo(f"note: {describe_scale(scale, height)}", err=True)
+        unit = infer_unit(bvh)
+        scale = unit.scale
+        click.echo(f"note: {unit.note()}", err=True)
+        if unit.warning:
+            click.echo(f"warning: {unit.warning}", err=True)
     pose = f"frame {frame}" if frame is not None else "its OFFSETs (rest pose)"
     note = f"Made by `puppetcli rig from-bvh` from {bvh_file.name}, {pose}, scale {scale:g} m/unit."
     text = rig_text_from_bvh(bvh, bvh_file.stem, scale, frame, note)

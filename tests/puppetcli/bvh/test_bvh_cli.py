@@ -45,7 +45,7 @@ def test_rig_from_bvh_writes_a_rig_that_validates(tmp_path) -> None:
     out = tmp_path / "walk.yaml"
     result = run("rig", "from-bvh", src, "-o", out)
     assert result.exit_code == 0, result.output
-    assert "assuming centimetres (--scale 0.01)" in result.stderr
+    assert "assuming centimetres (25–300 units across; --scale 0.01)" in result.stderr
     assert "wrote" in result.stdout and "65 bones" in result.stdout
     assert len(load_rig(out).bones) == 65
     assert run("validate", out).exit_code == 0

@@ -13,7 +13,8 @@ import pytest
 from test_bvh_fixtures import independent_fk, make_bvh
 
 from puppetcli.bvh.read import bvh_from_text
-from puppetcli.bvh.rig import auto_scale, rig_text_from_bvh
+from puppetcli.bvh.rig import rig_text_from_bvh
+from puppetcli.bvh.units import infer_unit
 from puppetcli.bvh.write import write_keys_bvh
 from puppetcli.rig.load import load_rig, rig_from_text
 from puppetcli.rig.skeleton import Skeleton
@@ -38,7 +39,7 @@ SCRIPT = "actions:\n  - key: start\n  - wait: 0.1\n  - key: end\n"
 def make_rig(tmp_path, kind, order, scale, frame=None):
     text = make_bvh(kind, order, frames=3)
     bvh = bvh_from_text(text, f"{kind}.bvh")
-    scale = scale or auto_scale(bvh)[0]
+    scale = scale or infer_unit(bvh).scale
     path = tmp_path / f"{kind}.yaml"
     path.write_text(rig_text_from_bvh(bvh, kind, scale, frame))
     return text, scale, load_rig(path)
@@ -107,11 +108,6 @@ def test_bvh_rig_bvh_keeps_names_hierarchy_and_offsets(tmp_path, kind, order, sc
     root = [float(v) for v in after.frames[0][:3]]
     np.testing.assert_allclose(root, before.joint_offset(names[0]), atol=1e-6 * size)
     np.testing.assert_allclose([float(v) for v in after.frames[0][3:]], 0.0, atol=1e-6)
-
-
-def test_auto_scale_detects_centimetres() -> None:
-    assert auto_scale(bvh_from_text(make_bvh("mixamo65")))[0] == 0.01
-    assert auto_scale(bvh_from_text(make_bvh("simple19")))[0] == 1.0
 
 
 def test_tails_shapes_and_joint_strength(tmp_path) -> None:
