@@ -72,7 +72,7 @@ def infer_unit(bvh: Bvh) -> Unit:
     size = figure_size(bvh)
     if size <= 0.0:
         return Unit("metres", 1.0, size, "a skeleton of no size")
-    if CMU_JOINTS <= set(bvh.names) and _in_human_range(size * CMU[1]):
+    if set(bvh.names) >= CMU_JOINTS and _in_human_range(size * CMU[1]):
         return _checked(Unit(CMU[0], CMU[1], size, "CMU's joint names"))
     for name, scale, (low, high) in UNITS:
         if low <= size < high:

@@ -20,7 +20,7 @@ from puppetcli.rig.skeleton import Skeleton
 from solver import quat
 from solver.massprops import shape_frame
 
-__all__ = ["SEGMENTS", "RINGS", "TriangleMesh", "bone_mesh", "skeleton_mesh"]
+__all__ = ["RINGS", "SEGMENTS", "TriangleMesh", "bone_mesh", "skeleton_mesh"]
 
 SEGMENTS = 16  # sides of a capsule around its axis
 RINGS = 4  # latitude rings of each hemisphere, pole excluded

@@ -170,9 +170,10 @@ def _material() -> gl.Material:
     return gl.Material(
         name="bone",
         pbrMetallicRoughness=gl.PbrMetallicRoughness(
-            baseColorFactor=[*[float(c) for c in linear], 1.0], metallicFactor=0.0,
+            baseColorFactor=[*[float(c) for c in linear], 1.0],
+            metallicFactor=0.0,
             roughnessFactor=0.8,
-        ),  # fmt: skip
+        ),
     )
 
 
