@@ -14,7 +14,7 @@ from puppetcli.mcap.replay import load_replay, replay_traced
 from puppetcli.mcap.session import is_session
 from puppetcli.outputs import make_parent, refuse_overwrite
 from puppetcli.render.camera import RenderError, View
-from puppetcli.render.inputs import input_kind, key_poses, trace_poses
+from puppetcli.render.inputs import OWN_SKELETON, file_rig, input_kind, key_poses, trace_poses
 from puppetcli.render.picture import (
     contact_sheet,
     default_cols,
@@ -43,9 +43,17 @@ from solver.model import build_model
 )
 @click.option(
     "--rig",
-    required=True,
     type=click.Path(exists=True, dir_okay=False, path_type=Path),
-    help="Rig file of the poses (bone shapes, props, ground). Required.",
+    help="Rig file of the poses (bone shapes, props, ground); needed for keyframes.json and "
+    "traces [default for a .bvh: the rig `rig from-bvh` makes of it].",
+)
+@click.option(
+    "--frame",
+    "frames",
+    type=click.IntRange(min=0),
+    multiple=True,
+    help="With a .bvh INPUT: draw this frame (0 = the first; repeat for more) "
+    "[default: up to 48, evenly spaced].",
 )
 @click.option(
     "--cols",
@@ -70,7 +78,8 @@ from solver.model import build_model
 def command(
     input_path: Path,
     sheet: Path | None,
-    rig: Path,
+    rig: Path | None,
+    frames: tuple[int, ...],
     cols: int | None,
     view: View,
     size: tuple[int, int],
@@ -82,21 +91,23 @@ def command(
 ) -> None:
     """Draw poses: a contact sheet of keys, or a video of a trace.
 
-    INPUT is keyframes.json, a .bvh file (when a BVH reader exists), a
-    trace.mcap (sheet: its key moments; --video: every step) or a recorded
-    session .mcap (replayed first, then drawn as its trace).  All panels share
-    one perspective camera fitted to all poses, so they compare directly.
-    Existing outputs are kept unless --force.
+    INPUT is keyframes.json, a .bvh file (its frames, standing on the
+    ground), a trace.mcap (sheet: its key moments; --video: every step), a
+    recorded session .mcap (replayed first, then drawn as its trace) or a rig
+    .yaml (its rest pose).  A .bvh file needs no --rig: its own skeleton is
+    drawn.  All panels share one perspective camera fitted to all poses, so
+    they compare directly.  Existing outputs are kept unless --force.
     """
-    kind = _check_request(input_path, sheet, video, force)
-    spec = load_rig(rig)
+    kind = _check_request(input_path, sheet, video, force, rig, frames)
+    say = lambda line: click.echo(line, err=True)  # noqa: E731
+    spec = load_rig(rig) if rig is not None else file_rig(input_path, kind, say)
     skel = Skeleton.from_spec(spec)
     if kind == "trace" and is_session(input_path):
         steps, poses = _session_poses(input_path, spec, skel, yes)
     elif kind == "trace":
         steps, poses = trace_poses(input_path, skel)
     else:
-        steps, poses = [], key_poses(input_path, kind, skel)
+        steps, poses = [], key_poses(input_path, kind, skel, spec, frames, say)
     if video is not None:  # refused before anything is written
         frames = frame_count([p.time for p in steps], fps)
         what = f"{frames:,} video frames at {fps:g} fps"
@@ -131,6 +142,8 @@ def _check_request(
     sheet: Path | None,
     video: Path | None,
     force: bool,
+    rig: Path | None,
+    frames: tuple[int, ...],
 ) -> str:
     """Every option checked before any file is read (a mistake is a usage error, status 2);
     returns the input kind."""
@@ -138,6 +151,16 @@ def _check_request(
         kind = input_kind(input_path)
     except RenderError as exc:
         raise click.BadParameter(str(exc), param_hint="'INPUT'") from None
+    if rig is None and kind not in OWN_SKELETON:
+        raise click.UsageError(
+            f"missing option '--rig': {shown(input_path.name)} holds poses, not the rig's bones"
+        )
+    if rig is not None and kind == "rig":
+        raise click.UsageError("INPUT is a rig already: leave out --rig")
+    if frames and kind != "bvh":
+        raise click.BadParameter(
+            f"expected a .bvh INPUT, got {shown(input_path.name)}", param_hint="'--frame'"
+        )
     if sheet is None and video is None:
         raise click.UsageError("nothing to write: give -o SHEET.png and/or --video OUT.mp4")
     if sheet is not None and sheet.suffix.lower() != ".png":

@@ -1,13 +1,11 @@
-"""What ``puppetcli render`` can draw: poses read from keyframes.json, a BVH file or a trace.
+"""What ``puppetcli render`` can draw: poses from keyframes.json, a BVH file, a trace or a rig.
 
 - ``keyframes.json``: one pose per key (``puppetcli.rig.skeleton.key_pose``).
-- ``.bvh``: through ``read_bvh`` of ``puppetcli.bvh.model`` or ``puppetcli.bvh.read``
-  when one exists (otherwise a clear "not supported yet" error).  Joints match
-  bones by name; each frame's forward kinematics gives bone heads and world
-  rotations (the BVH rest pose is the rig's rest pose, as ``puppetcli.bvh.model``
-  writes it); file units are scaled to metres by the ratio of the rig's
-  joint-to-joint lengths to the file's.  At most ``MAX_BVH_PANELS`` frames,
-  evenly spaced, make a sheet.
+- ``.bvh``: its frames drawn on the rig (``puppetcli.render.motion``: the rig's
+  rest pose is found among the file's rest pose and frames, the motion scaled to
+  the rig and set on its ground); without ``--rig`` on ``rig from-bvh``'s rig of
+  the file, its unit inferred.  At most ``MAX_PANELS`` frames, evenly spaced,
+  make a sheet, or the frames asked for.
 - ``trace.mcap``: one pose per recorded step.  Head and tail of every bone come
   from the ``/puppet/bones`` line list (in the ``/tf`` bone order), the bone
   rotations from ``/tf`` (composed down the tree; without ``/tf``, the shortest
@@ -15,37 +13,43 @@
   coupling line from ``/puppet/pointer``.  Key moments are the
   ``/puppet/keyframe`` events, each shown with the recorded step nearest to it (an
   ``undo`` event drops the latest).
+- a rig ``.yaml``: its rest pose.
 
-Every input needs the rig (``--rig``) for bone shapes, props and the ground.
+keyframes.json and traces need the rig (``--rig``) for bone shapes, props and
+the ground.
 """
 
 from __future__ import annotations
 
 import bisect
-import importlib
-import re
 from collections.abc import Callable, Sequence
 from dataclasses import replace
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
+from puppetcli.bvh.model import forward_kinematics
+from puppetcli.bvh.read import read_bvh
+from puppetcli.bvh.rig import rig_text_from_bvh
+from puppetcli.bvh.units import infer_unit
 from puppetcli.errors import shown
 from puppetcli.mcap.trace import PUPPET_FRAME, read_trace
 from puppetcli.render.camera import RenderError
+from puppetcli.render.motion import Motion, motion_poses
 from puppetcli.render.picture import Pose, poses_from_keys
+from puppetcli.rig.load import load_rig, rig_from_text
 from puppetcli.rig.skeleton import Skeleton
 from puppetcli.run.keyframes import read_keyframes
 from puppetcli.yamldoc import LARGEST
 from solver import quat
+from solver.spec import RigSpec
 
-__all__ = ["INPUT_KINDS", "input_kind", "key_poses", "trace_poses"]
+__all__ = ["INPUT_KINDS", "OWN_SKELETON", "file_rig", "input_kind", "key_poses", "trace_poses"]
 
-INPUT_KINDS = {".json": "keyframes", ".bvh": "bvh", ".mcap": "trace"}
+INPUT_KINDS = {".json": "keyframes", ".bvh": "bvh", ".mcap": "trace", ".yaml": "rig",
+               ".yml": "rig"}  # fmt: skip
+OWN_SKELETON = ("bvh", "rig")  # kinds that need no --rig
 SAMPLED_PANELS = 9  # panels of a sheet of a trace without key events
-_BVH_API = ("names", "nframes", "frame_time", "forward_kinematics")  # what we use of a BVH
-MAX_BVH_PANELS = 48  # frames of a BVH shown at most (evenly spaced, first and last included)
 
 
 def input_kind(path: Path) -> str:
@@ -53,78 +57,53 @@ def input_kind(path: Path) -> str:
     kind = INPUT_KINDS.get(Path(path).suffix.lower())
     if kind is None:
         raise RenderError(
-            f"{path}: expected keyframes.json, a .bvh file or a trace .mcap, "
+            f"{path}: expected keyframes.json, a .bvh file, a trace .mcap or a rig .yaml, "
             f"got a {Path(path).suffix or 'suffix-less'} file"
         )
     return kind
 
 
-def _bvh_reader() -> Callable[[Path], Any] | None:
-    """``read_bvh`` of ``puppetcli.bvh.model`` or ``puppetcli.bvh.read``, if either exists."""
-    for name in ("puppetcli.bvh.model", "puppetcli.bvh.read"):
-        try:
-            module = importlib.import_module(name)
-        except ImportError:
-            continue
-        if callable(getattr(module, "read_bvh", None)):
-            return module.read_bvh
-    return None
+def bvh_motion(path: Path) -> Motion:
+    """Every frame of a BVH file as a :class:`Motion` (frame f labelled ``frame f``, as
+    ``rig from-bvh --frame f`` counts them)."""
+    bvh = read_bvh(Path(path))
+    rest_heads, rest_rots = bvh.forward_kinematics(None)
+    trans, rot = bvh.poses()
+    heads, rots = forward_kinematics(bvh.parents, trans, rot)
+    nf = bvh.nframes
+    return Motion(bvh.names, bvh.parents, rest_heads, rest_rots, heads, rots,
+                  np.arange(nf) * float(bvh.frame_time), tuple(f"frame {f}" for f in range(nf)),
+                  str(path))  # fmt: skip
 
 
-def _bvh_index(skel: Skeleton, names: Sequence[str], path: Path) -> np.ndarray:
-    """Index of each rig bone among the BVH joints: same name, or the name with runs of
-    whitespace and braces replaced by ``_`` (as BVH writers must)."""
-    index = {n: i for i, n in enumerate(names)}
-    out = []
-    for bone in skel.names:
-        i = index.get(bone, index.get(re.sub(r"[\s{}]+", "_", bone)))
-        if i is None:
-            raise RenderError(
-                f"{path}: expected a joint for every bone of the rig, got no {bone!r}"
-            )
-        out.append(i)
-    return np.array(out)
+def file_rig(path: Path, kind: str, say: Callable[[str], None]) -> RigSpec:
+    """The rig of a file that carries its own skeleton: a BVH file (``rig from-bvh``'s rig,
+    its unit inferred) or a rig file itself."""
+    if kind == "rig":
+        return load_rig(Path(path))
+    bvh = read_bvh(Path(path))
+    unit = infer_unit(bvh)
+    say(f"note: {path}: {unit.note()}")
+    if unit.warning:
+        say(f"warning: {path}: {unit.warning}")
+    return rig_from_text(rig_text_from_bvh(bvh, Path(path).stem, unit.scale), f"<rig of {path}>")
 
 
-def _bvh_scale(skel: Skeleton, rest: np.ndarray, index: np.ndarray) -> float:
-    """Metres per BVH file unit: the rig's joint-to-joint lengths over the file's, at rest."""
-    child = np.flatnonzero(skel.parents >= 0)
-    parent = skel.parents[child]
-    rig = np.linalg.norm(skel.head0[child] - skel.head0[parent], axis=1).sum()
-    bvh = np.linalg.norm(rest[index[child]] - rest[index[parent]], axis=1).sum()
-    return float(rig / bvh) if bvh > 0.0 and rig > 0.0 else 1.0
-
-
-def bvh_poses(path: Path, skel: Skeleton) -> list[Pose]:
-    """Frames of a BVH file as poses of the rig (at most ``MAX_BVH_PANELS``, evenly spaced)."""
-    reader = _bvh_reader()
-    if reader is None:
-        raise RenderError(
-            f"{path}: BVH input is not supported yet (no BVH reader); render keyframes.json"
-        )
-    motion = reader(Path(path))
-    if not all(
-        hasattr(motion, a) for a in ("names", "nframes", "frame_time", "forward_kinematics")
-    ):
-        raise RenderError(f"{path}: BVH input is not supported yet (unknown reader result)")
-    if motion.nframes < 1:
-        raise RenderError(f"{path}: expected at least one frame, got none")
-    index = _bvh_index(skel, motion.names, path)
-    scale = _bvh_scale(skel, motion.forward_kinematics(None)[0], index)
-    count = min(MAX_BVH_PANELS, motion.nframes)
-    poses = []
-    for f in np.unique(np.linspace(0, motion.nframes - 1, count).round().astype(int)):
-        heads, world = motion.forward_kinematics(int(f))
-        head, rot = heads[index] * scale, quat.normalize(world[index])
-        tail = head + quat.rotate(rot, skel.tail0 - skel.head0)
-        poses.append(Pose(head, tail, rot, f"frame {f + 1}", f * float(motion.frame_time)))
-    return poses
-
-
-def key_poses(path: Path, kind: str, skel: Skeleton) -> list[Pose]:
-    """The poses of a keyframes.json or BVH file (``kind`` from :func:`input_kind`)."""
+def key_poses(
+    path: Path,
+    kind: str,
+    skel: Skeleton,
+    spec: RigSpec,
+    frames: Sequence[int] = (),
+    say: Callable[[str], None] = lambda line: None,
+) -> list[Pose]:
+    """The poses of a keyframes.json, BVH or rig file (``kind`` from :func:`input_kind`);
+    ``frames`` picks a BVH file's frames."""
     if kind == "bvh":
-        return bvh_poses(path, skel)
+        return motion_poses(bvh_motion(path), skel, spec, frames, say)
+    if kind == "rig":
+        rest = np.tile(quat.IDENTITY, (len(skel.names), 1))
+        return [Pose(skel.head0, skel.tail0, rest, "rest", 0.0)]
     keys = read_keyframes(Path(path))[1]
     if not keys:
         raise RenderError(f"{path}: expected at least one key, got none")

@@ -35,6 +35,8 @@ from puppetcli.render.scene import (
     draw_ground,
     draw_items,
     draw_shadows,
+    figure_factor,
+    grid_step,
     pose_extent,
     prop_extent,
 )
@@ -64,12 +66,13 @@ _KEY_PNG = re.compile(r"\d{3,}\.png")
 
 @dataclass(frozen=True)
 class Framing:
-    """The fixed picture set-up of one call: camera, ground height (None = no ground), and
-    the ground grid's extent (x0, x1, z0, z1) in m."""
+    """The fixed picture set-up of one call: camera, ground height (None = no ground), the
+    ground grid's extent (x0, x1, z0, z1) and its step, in m."""
 
     camera: Camera
     ground: float | None
     bounds: np.ndarray
+    step: float = GRID_STEP
 
 
 def frame_poses(
@@ -91,16 +94,17 @@ def frame_poses(
         shadow = points.copy()
         shadow[:, 1] = ground
         points, radii = np.vstack((points, shadow)), np.concatenate((radii, radii))
-    lo, hi = points.min(axis=0) - GRID_MARGIN, points.max(axis=0) + GRID_MARGIN
+    margin, step = GRID_MARGIN * figure_factor(skel), grid_step(skel)
+    lo, hi = points.min(axis=0) - margin, points.max(axis=0) + margin
     bounds = np.array(
         [
-            math.floor(lo[0] / GRID_STEP) * GRID_STEP,
-            math.ceil(hi[0] / GRID_STEP) * GRID_STEP,
-            math.floor(lo[2] / GRID_STEP) * GRID_STEP,
-            math.ceil(hi[2] / GRID_STEP) * GRID_STEP,
+            math.floor(lo[0] / step) * step,
+            math.ceil(hi[0] / step) * step,
+            math.floor(lo[2] / step) * step,
+            math.ceil(hi[2] / step) * step,
         ]
     )
-    return Framing(fit_camera(view, points, radii, size), ground, bounds)
+    return Framing(fit_camera(view, points, radii, size), ground, bounds, step)
 
 
 def _caption(img: np.ndarray, pose: Pose) -> None:
@@ -125,7 +129,7 @@ def render_pose(
     img = np.empty((h, w, 3), np.uint8)
     img[:] = BACKGROUND
     if framing.ground is not None:
-        draw_ground(img, cam, framing.ground, framing.bounds)
+        draw_ground(img, cam, framing.ground, framing.bounds, framing.step)
         draw_shadows(img, cam, skel, pose, framing.ground)
     draw_items(img, cam, skel, pose, spec)
     img = cv2.resize(img, framing.camera.size, interpolation=cv2.INTER_AREA)

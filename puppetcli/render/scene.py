@@ -8,7 +8,9 @@ ground (when the rig has one) is a grid of ``GRID_STEP`` squares covering the
 fitted scene, with each bone's contact shadow: the bone projected straight down,
 darker the nearer it is to the ground (linear fade to nothing at
 ``SHADOW_FADE`` m), capsules split in pieces so that a leaning limb darkens
-towards the end that touches.
+towards the end that touches.  Joint dots, grid, shadow fade and the ground's
+margin are sized for a figure of ``REFERENCE_SIZE``; a smaller figure (a doll
+of 30 cm) gets them scaled down with it (``figure_factor``).
 
 Occlusion is the painter's algorithm (``puppetcli.render.order``): every
 drawable (a capsule, a sphere, one face of a box, a joint dot) gets the depth
@@ -20,6 +22,7 @@ wrong order; for a doll's limbs this is rarely visible.
 from __future__ import annotations
 
 import itertools
+import math
 from dataclasses import dataclass, replace
 
 import cv2
@@ -33,8 +36,13 @@ from solver import quat
 from solver.massprops import shape_frame
 from solver.spec import RigSpec
 
-__all__ = ["Pose", "draw_ground", "draw_items", "pose_extent", "prop_extent"]
+__all__ = [
+    "Pose", "draw_ground", "draw_items", "figure_factor", "grid_step", "pose_extent", "prop_extent",
+]  # fmt: skip
 
+# Sizes for a figure of REFERENCE_SIZE m (the rest pose's bounding-box diagonal) or more; a
+# smaller figure gets them scaled by its size / REFERENCE_SIZE (the grid step by a power of 10).
+REFERENCE_SIZE = 2.0  # m
 GRID_STEP = 0.25  # m between ground grid lines (× 10 while a side would have more lines)
 MAX_GRID_LINES = 60
 GRID_MARGIN = 0.3  # m of ground shown around the scene
@@ -68,6 +76,17 @@ class Pose:
     pointer: np.ndarray | None = None
     grip: np.ndarray | None = None
     pointer_radius: float = 0.02
+
+
+def figure_factor(skel: Skeleton) -> float:
+    """How much smaller than ``REFERENCE_SIZE`` the figure is, in (0, 1]: joint dots, the
+    ground's margin, grid and shadow fade are scaled by it."""
+    return float(np.clip(skel.size / REFERENCE_SIZE, 1e-6, 1.0))
+
+
+def grid_step(skel: Skeleton) -> float:
+    """``GRID_STEP`` × the power of ten at or below the figure factor."""
+    return GRID_STEP * 10.0 ** math.floor(math.log10(figure_factor(skel)) + 1e-9)
 
 
 def box_corners(centre: np.ndarray, q: np.ndarray, half: np.ndarray) -> np.ndarray:
@@ -166,6 +185,7 @@ def _tube_item(cam: Camera, a: np.ndarray, b: np.ndarray, r: float, group: int) 
 def _bone_items(cam: Camera, skel: Skeleton, pose: Pose) -> list[Item]:
     """Painter items of every bone shape and joint dot."""
     items: list[Item] = []
+    joint_radius = JOINT_RADIUS * figure_factor(skel)
     for i, kind in enumerate(skel.shape):
         head, tail, r = pose.head[i], pose.tail[i], float(skel.radius[i])
         if kind == "capsule":
@@ -177,7 +197,7 @@ def _bone_items(cam: Camera, skel: Skeleton, pose: Pose) -> list[Item]:
             r = float(np.min(skel.half[i]))
         if skel.parents[i] >= 0:
             # Drawn as if on the bone's surface facing the eye, so its own bone never hides it.
-            dot = _ball_item(cam, head, JOINT_RADIUS, JOINT_COLOR, i)
+            dot = _ball_item(cam, head, joint_radius, JOINT_COLOR, i)
             items.append(replace(dot, depth=dot.depth - r))
     return items
 
@@ -209,8 +229,11 @@ def _ground_polygon(cam: Camera, corners: np.ndarray) -> np.ndarray | None:
     return cam.focal * clipped[:, :2] / clipped[:, 2:3] + cam.centre
 
 
-def draw_ground(img: np.ndarray, cam: Camera, height: float, bounds: np.ndarray) -> None:
-    """The ground plane y = ``height`` over ``bounds`` (x0, x1, z0, z1): fill and grid lines."""
+def draw_ground(
+    img: np.ndarray, cam: Camera, height: float, bounds: np.ndarray, step: float
+) -> None:
+    """The ground plane y = ``height`` over ``bounds`` (x0, x1, z0, z1): fill and grid lines
+    ``step`` m apart (× 10 while a side would have more than ``MAX_GRID_LINES``)."""
     if not np.all(np.isfinite(bounds)):
         return
     x0, x1, z0, z1 = bounds
@@ -219,7 +242,6 @@ def draw_ground(img: np.ndarray, cam: Camera, height: float, bounds: np.ndarray)
     if poly is not None and len(poly) >= 3:
         draw.fill_polygon(img, poly, GROUND_COLOR)
     width = max(1, round(img.shape[0] / 480))
-    step = GRID_STEP  # × 10 until a wide ground has at most MAX_GRID_LINES lines a side
     while max(x1 - x0, z1 - z0) > MAX_GRID_LINES * step:
         step *= 10.0
     xs = np.arange(x0, x1 + 1e-9, step)
@@ -255,8 +277,9 @@ def _shadow_pieces(skel: Skeleton, pose: Pose, height: float) -> list[tuple[floa
 def draw_shadows(img: np.ndarray, cam: Camera, skel: Skeleton, pose: Pose, height: float) -> None:
     """Contact shadows: each piece dropped onto the ground, darkest drawn last."""
     shadows = []
+    fade = SHADOW_FADE * figure_factor(skel)
     for lift, pts in _shadow_pieces(skel, pose, height):
-        strength = SHADOW_DARK * float(np.clip(1.0 - lift / SHADOW_FADE, 0.0, 1.0))
+        strength = SHADOW_DARK * float(np.clip(1.0 - lift / fade, 0.0, 1.0))
         if strength > 0.02:
             flat = pts.copy()
             flat[:, 1] = height

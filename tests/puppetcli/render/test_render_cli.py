@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import importlib
-import importlib.util
 from pathlib import Path
 
 import cv2
@@ -116,14 +114,15 @@ def test_input_errors(tmp_path: Path, keyfile: Path) -> None:
     bad = tmp_path / "bad.json"
     bad.write_text("{")
     assert f"error: {bad}: expected JSON" in one_error(run(str(bad), "--rig", str(DOLL), *out))
-    assert usage_error(run(str(keyfile), *out)).startswith("error: Missing option '--rig'.")
+    assert usage_error(run(str(keyfile), *out)).startswith("error: missing option '--rig': ")
     assert usage_error(run(str(keyfile), "--rig", str(tmp_path / "no.yaml"), *out)).startswith(
         f"error: Invalid value for '--rig': File '{tmp_path / 'no.yaml'}' does not exist."
     )
     text = tmp_path / "pose.txt"
     text.write_text("x")
-    assert "expected keyframes.json, a .bvh file or a trace .mcap, got a .txt file" in usage_error(
-        run(str(text), "--rig", str(DOLL), *out)
+    assert (
+        "expected keyframes.json, a .bvh file, a trace .mcap or a rig .yaml, got a .txt file"
+        in usage_error(run(str(text), "--rig", str(DOLL), *out))
     )
     corrupt = tmp_path / "trace.mcap"
     corrupt.write_bytes(b"\x89MCAP0\r\n" + b"\0" * 40)
@@ -140,29 +139,19 @@ def test_keys_of_another_rig(tmp_path: Path, keyfile: Path) -> None:
 
 
 def test_bvh_input(tmp_path: Path) -> None:
-    """With a BVH reader: frames written from keys (in cm) render as those keys' poses.
-    Without one: a clear one-line "not supported yet" error."""
-    from puppetcli.render.inputs import _bvh_reader, key_poses
+    """Frames written from keys (in cm) render as those keys' poses, labelled by frame index
+    as ``rig from-bvh --frame`` counts them."""
+    from puppetcli.bvh.write import write_keys_bvh
+    from puppetcli.render.inputs import key_poses
     from puppetcli.render.picture import poses_from_keys
 
     path = tmp_path / "motion.bvh"
-    if _bvh_reader() is None:
-        path.write_text("HIERARCHY\n")
-        line = one_error(run(str(path), "--rig", str(DOLL), "-o", str(tmp_path / "s.png")))
-        assert line == (
-            f"error: {path}: BVH input is not supported yet (no BVH reader); render keyframes.json"
-        )
-        return
-    spec = importlib.util.find_spec("puppetcli.bvh.write")
-    writer = importlib.import_module("puppetcli.bvh.write") if spec else None
-    if not hasattr(writer, "write_keys_bvh"):
-        pytest.skip("no BVH writer to make a test file with")
-    _, skel = doll()
+    spec, skel = doll()
     ks = keys(skel, 4)
-    writer.write_keys_bvh(path, skel, ks, scale=100.0, fps=10.0)
-    got = key_poses(path, "bvh", skel)
+    write_keys_bvh(path, skel, ks, scale=100.0, fps=10.0)
+    got = key_poses(path, "bvh", skel, spec)
     expected = poses_from_keys(skel, ks)
-    assert [p.label for p in got] == ["frame 1", "frame 2", "frame 3", "frame 4"]
+    assert [p.label for p in got] == ["frame 0", "frame 1", "frame 2", "frame 3"]
     assert [p.time for p in got] == pytest.approx([0.0, 0.1, 0.2, 0.3])
     for a, b in zip(got, expected, strict=True):
         assert np.allclose(a.head, b.head, atol=1e-6) and np.allclose(a.tail, b.tail, atol=1e-6)
