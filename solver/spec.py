@@ -164,3 +164,6 @@ class RigSpec:
     props: tuple[PropSpec, ...] = ()
     bone_friction: float = 0.6
     solver: SolverSpec = field(default_factory=SolverSpec)
+    # The glTF file (path) and skin the rig was made from: exporters animate that character.
+    # Not simulated.
+    character: tuple[str, int] | None = None

@@ -18,7 +18,7 @@ from puppetcli.commands.options import (
 )
 from puppetcli.commands.report import JSON_OPTION, emit, progress_bar
 from puppetcli.errors import ScriptError, shown
-from puppetcli.gltf.write import write_keys_glb
+from puppetcli.gltf.export import write_glb
 from puppetcli.mcap.replay import load_replay
 from puppetcli.outputs import make_parent, refuse_overwrite
 from puppetcli.rig.load import load_rig
@@ -96,11 +96,10 @@ def command(
     if not frames:
         raise ScriptError(f"{source}: expected at least one 'key' action (or --fps), got none")
     make_parent(out)
-    skel = Skeleton.from_spec(spec)
     if out.suffix.lower() == ".glb":
-        write_keys_glb(out, skel, frames, model.name, fps or KEYS_FPS, "LINEAR" if fps else "STEP")
+        write_glb(out, spec, frames, fps or KEYS_FPS, "LINEAR" if fps else "STEP")
     else:
-        write_keys_bvh(out, skel, frames, order.upper(), scale, fps or KEYS_FPS)
+        write_keys_bvh(out, Skeleton.from_spec(spec), frames, order.upper(), scale, fps or KEYS_FPS)
     what = f"{len(frames)} frames at {fps:g} fps" if fps else f"{len(frames)} keys"
     line = f"wrote {out}: {what}, {result.state.time:.3f} s simulated"
     line += f", order {order.upper()}" if out.suffix.lower() == ".bvh" else ""

@@ -45,14 +45,14 @@ from solver.model import build_model
     "--rig",
     type=click.Path(exists=True, dir_okay=False, path_type=Path),
     help="Rig file of the poses (bone shapes, props, ground); needed for keyframes.json and "
-    "traces [default for a .bvh: the rig `rig from-bvh` makes of it].",
+    "traces [default for a .bvh or .glb: the rig `rig from-bvh`/`from-gltf` makes of it].",
 )
 @click.option(
     "--frame",
     "frames",
     type=click.IntRange(min=0),
     multiple=True,
-    help="With a .bvh INPUT: draw this frame (0 = the first; repeat for more) "
+    help="With a .bvh or .glb INPUT: draw this frame (0 = the first; repeat for more) "
     "[default: up to 48, evenly spaced].",
 )
 @click.option(
@@ -91,11 +91,11 @@ def command(
 ) -> None:
     """Draw poses: a contact sheet of keys, or a video of a trace.
 
-    INPUT is keyframes.json, a .bvh file (its frames, standing on the
+    INPUT is keyframes.json, a .bvh or .glb file (its frames, standing on the
     ground), a trace.mcap (sheet: its key moments; --video: every step), a
     recorded session .mcap (replayed first, then drawn as its trace) or a rig
-    .yaml (its rest pose).  A .bvh file needs no --rig: its own skeleton is
-    drawn.  All panels share one perspective camera fitted to all poses, so
+    .yaml (its rest pose).  A .bvh or .glb file needs no --rig: its own
+    skeleton is drawn.  All panels share one perspective camera fitted to all poses, so
     they compare directly.  Existing outputs are kept unless --force.
     """
     kind = _check_request(input_path, sheet, video, force, rig, frames)
@@ -157,9 +157,9 @@ def _check_request(
         )
     if rig is not None and kind == "rig":
         raise click.UsageError("INPUT is a rig already: leave out --rig")
-    if frames and kind != "bvh":
+    if frames and kind not in ("bvh", "gltf"):
         raise click.BadParameter(
-            f"expected a .bvh INPUT, got {shown(input_path.name)}", param_hint="'--frame'"
+            f"expected a .bvh or .glb INPUT, got {shown(input_path.name)}", param_hint="'--frame'"
         )
     if sheet is None and video is None:
         raise click.UsageError("nothing to write: give -o SHEET.png and/or --video OUT.mp4")

@@ -1,7 +1,9 @@
-"""``puppetcli rig from-bvh FILE.bvh -o RIG.yaml``: make a rig from a BVH skeleton."""
+"""``puppetcli rig from-bvh FILE.bvh -o RIG.yaml`` and ``rig from-gltf FILE.glb -o RIG.yaml``:
+make a rig from a BVH skeleton or a skinned glTF character."""
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import click
@@ -10,6 +12,8 @@ from puppetcli.bvh.read import read_bvh
 from puppetcli.bvh.rig import check_frame, rig_text_from_bvh
 from puppetcli.bvh.units import infer_unit
 from puppetcli.commands.options import SCALE, force_option
+from puppetcli.gltf.read import read_gltf
+from puppetcli.gltf.rig import rig_text_from_gltf
 from puppetcli.outputs import refuse_overwrite, write_text_atomic
 from puppetcli.rig.load import rig_from_text
 from solver.model import build_model
@@ -65,9 +69,47 @@ def from_bvh(
     pose = f"frame {frame}" if frame is not None else "its OFFSETs (rest pose)"
     note = f"Made by `puppetcli rig from-bvh` from {bvh_file.name}, {pose}, scale {scale:g} m/unit."
     text = rig_text_from_bvh(bvh, bvh_file.stem, scale, frame, note)
+    _write_rig(out, text, f"{bvh_file} ({pose}, scale {scale:g})")
+
+
+def _write_rig(out: Path, text: str, what: str) -> None:
     model = build_model(rig_from_text(text, str(out)))
     write_text_atomic(out, text)
     click.echo(
-        f"wrote {out}: {len(model.bone_names)} bones from {bvh_file} "
-        f"({pose}, scale {scale:g}), {model.body_mass.sum():.3f} kg"
+        f"wrote {out}: {len(model.bone_names)} bones from {what}, {model.body_mass.sum():.3f} kg"
     )
+
+
+@command.command("from-gltf")
+@click.argument("gltf_file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.option(
+    "-o",
+    "--out",
+    "out",
+    required=True,
+    type=click.Path(dir_okay=False, path_type=Path),
+    help="The rig file to write (YAML).",
+)
+@click.option(
+    "--skin",
+    type=click.IntRange(min=0),
+    default=0,
+    show_default=True,
+    help="The skin (skeleton) to take, when the file has several.",
+)
+@force_option("RIG.yaml if it exists")
+def from_gltf(gltf_file: Path, out: Path, skin: int, force: bool) -> None:
+    """Turn the skeleton of a skinned glTF 2.0 character (.glb or .gltf) into a rig.
+
+    Bones are the skin's joints at the bind pose; capsule shapes and masses
+    come from the mesh vertices bound to each joint; joints and ground as `rig
+    from-bvh` makes them.  The rig remembers the file: `pose --gltf` and
+    `convert -o OUT.glb` then write the character itself, animated by the keys.
+    See docs/gltf.md.
+    """
+    refuse_overwrite(out, force)
+    g = read_gltf(gltf_file)
+    character = os.path.relpath(gltf_file.resolve(), out.resolve().parent)
+    note = f"Made by `puppetcli rig from-gltf` from {gltf_file.name}, skin {skin}, bind pose."
+    text = rig_text_from_gltf(g, skin, gltf_file.stem, note, character)
+    _write_rig(out, text, f"{gltf_file} (skin {skin}, bind pose)")

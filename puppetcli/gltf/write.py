@@ -38,18 +38,21 @@ from puppetcli.rig.skeleton import Skeleton
 from puppetcli.run.keyframes import Keyframe
 from solver import quat
 
-__all__ = ["INTERPOLATIONS", "keys_gltf", "write_keys_glb"]
+__all__ = [
+    "INTERPOLATIONS", "Blob", "continuous", "key_animation", "keys_gltf", "save_glb",
+    "write_keys_glb",
+]  # fmt: skip
 
 INTERPOLATIONS = ("STEP", "LINEAR")
 BONE_RGB = (217, 191, 140)  # sRGB of the renderer's bone colour
 _TYPES = {1: "SCALAR", 3: "VEC3", 4: "VEC4", 16: "MAT4"}
 
 
-class _Blob:
+class Blob:
     """The one binary buffer of a document: arrays appended as buffer views and accessors."""
 
-    def __init__(self, doc: gl.GLTF2) -> None:
-        self.doc, self.data = doc, bytearray()
+    def __init__(self, doc: gl.GLTF2, data: bytes = b"") -> None:
+        self.doc, self.data = doc, bytearray(data)
 
     def add(self, array: np.ndarray, component: int, target: int | None = None,
             bounds: bool = False) -> int:  # fmt: skip
@@ -98,7 +101,7 @@ def keys_gltf(
     if interpolation not in INTERPOLATIONS:
         raise ValueError(f"interpolation must be STEP or LINEAR, got {interpolation!r}")
     doc = gl.GLTF2(asset=gl.Asset(version="2.0", generator=f"puppetcli {version('puppetcli')}"))
-    blob = _Blob(doc)
+    blob = Blob(doc)
     nb = len(skel.names)
     _joint_nodes(doc, skel)
     doc.nodes.append(gl.Node(name="doll", mesh=0, skin=0))
@@ -126,7 +129,12 @@ def write_keys_glb(
     interpolation: str = "STEP",
 ) -> None:
     """Write ``keys`` as a .glb file atomically."""
-    data = b"".join(keys_gltf(skel, keys, name, fps, interpolation).save_to_bytes())
+    save_glb(path, keys_gltf(skel, keys, name, fps, interpolation))
+
+
+def save_glb(path: Path, doc: gl.GLTF2) -> None:
+    """Write a document with its binary blob as a .glb file, atomically."""
+    data = b"".join(doc.save_to_bytes())
     with atomic_path(Path(path)) as tmp:
         tmp.write_bytes(data)
 
@@ -142,7 +150,7 @@ def _joint_nodes(doc: gl.GLTF2, skel: Skeleton) -> None:
         )
 
 
-def _doll_mesh(blob: _Blob, skel: Skeleton) -> gl.Mesh:
+def _doll_mesh(blob: Blob, skel: Skeleton) -> gl.Mesh:
     """The rest shapes of every bone, each vertex bound to its bone alone."""
     mesh = skeleton_mesh(skel)
     n = len(mesh.positions)
@@ -202,27 +210,47 @@ def local_motion(skel: Skeleton, keys: Sequence[Keyframe]) -> tuple[np.ndarray, 
     h_parent = np.where(rooted, 0.0, head[:, parent])
     trans = quat.rotate(quat.conj(q_parent), head - h_parent)
     local = quat.mul(quat.conj(q_parent), rot)
-    for k in range(1, len(local)):
-        flip = np.sum(local[k] * local[k - 1], axis=-1) < 0.0
-        local[k, flip] *= -1.0
-    return trans, local
+    return trans, continuous(local)
+
+
+def continuous(q: np.ndarray) -> np.ndarray:
+    """Quaternions (nk, n, 4) with signs flipped so each is within 90° of the key before
+    (the shorter way for viewers that interpolate them linearly)."""
+    q = np.array(q, dtype=float)
+    for k in range(1, len(q)):
+        q[k, np.sum(q[k] * q[k - 1], axis=-1) < 0.0] *= -1.0
+    return q
 
 
 def _animation(
-    blob: _Blob, skel: Skeleton, keys: Sequence[Keyframe], fps: float, interpolation: str
+    blob: Blob, skel: Skeleton, keys: Sequence[Keyframe], fps: float, interpolation: str
 ) -> gl.Animation:
-    times = key_times(keys, fps, interpolation)
     trans, rot = local_motion(skel, keys)
+    return key_animation(blob, list(range(len(skel.names))), trans, rot, keys, fps, interpolation)
+
+
+def key_animation(
+    blob: Blob,
+    nodes: list[int],
+    trans: np.ndarray,
+    rot: np.ndarray,
+    keys: Sequence[Keyframe],
+    fps: float,
+    interpolation: str,
+) -> gl.Animation:
+    """The animation ``keys`` of ``nodes``: translations (nk,nn,3) and rotations (nk,nn,4)
+    w-first, one translation and one rotation channel per node, key labels as markers."""
+    times = key_times(keys, fps, interpolation)
     xyzw = rot[..., [1, 2, 3, 0]]
     inputs = blob.add(times.reshape(-1, 1), gl.FLOAT, bounds=True)
     samplers, channels = [], []
-    for i in range(len(skel.names)):
+    for i, node in enumerate(nodes):
         for path, values in (("translation", trans[:, i]), ("rotation", xyzw[:, i])):
             output = blob.add(values, gl.FLOAT)
             samplers.append(
                 gl.AnimationSampler(input=inputs, output=output, interpolation=interpolation)
             )
-            target = gl.AnimationChannelTarget(node=i, path=path)
+            target = gl.AnimationChannelTarget(node=node, path=path)
             channels.append(gl.AnimationChannel(sampler=len(samplers) - 1, target=target))
     markers = [{"time": float(t), "label": k.label, "key": i}
                for i, (t, k) in enumerate(zip(times, keys, strict=True))]  # fmt: skip

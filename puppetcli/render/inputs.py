@@ -6,6 +6,8 @@
   the rig and set on its ground); without ``--rig`` on ``rig from-bvh``'s rig of
   the file, its unit inferred.  At most ``MAX_PANELS`` frames, evenly spaced,
   make a sheet, or the frames asked for.
+- ``.glb``/``.gltf``: the same for the first skin and its first animation (one
+  frame per key marker or key time), without ``--rig`` on ``rig from-gltf``'s rig.
 - ``trace.mcap``: one pose per recorded step.  Head and tail of every bone come
   from the ``/puppet/bones`` line list (in the ``/tf`` bone order), the bone
   rotations from ``/tf`` (composed down the tree; without ``/tf``, the shortest
@@ -33,6 +35,8 @@ from puppetcli.bvh.read import read_bvh
 from puppetcli.bvh.rig import rig_text_from_bvh
 from puppetcli.bvh.units import infer_unit
 from puppetcli.errors import shown
+from puppetcli.gltf.read import quat_from_matrix, read_gltf, skin_joints
+from puppetcli.gltf.rig import rig_text_from_gltf
 from puppetcli.mcap.trace import PUPPET_FRAME, read_trace
 from puppetcli.render.camera import RenderError
 from puppetcli.render.motion import Motion, motion_poses
@@ -46,9 +50,9 @@ from solver.spec import RigSpec
 
 __all__ = ["INPUT_KINDS", "OWN_SKELETON", "file_rig", "input_kind", "key_poses", "trace_poses"]
 
-INPUT_KINDS = {".json": "keyframes", ".bvh": "bvh", ".mcap": "trace", ".yaml": "rig",
-               ".yml": "rig"}  # fmt: skip
-OWN_SKELETON = ("bvh", "rig")  # kinds that need no --rig
+INPUT_KINDS = {".json": "keyframes", ".bvh": "bvh", ".glb": "gltf", ".gltf": "gltf",
+               ".mcap": "trace", ".yaml": "rig", ".yml": "rig"}  # fmt: skip
+OWN_SKELETON = ("bvh", "gltf", "rig")  # kinds that need no --rig
 SAMPLED_PANELS = 9  # panels of a sheet of a trace without key events
 
 
@@ -57,7 +61,7 @@ def input_kind(path: Path) -> str:
     kind = INPUT_KINDS.get(Path(path).suffix.lower())
     if kind is None:
         raise RenderError(
-            f"{path}: expected keyframes.json, a .bvh file, a trace .mcap or a rig .yaml, "
+            f"{path}: expected keyframes.json, a .bvh or .glb file, a trace .mcap or a rig .yaml, "
             f"got a {Path(path).suffix or 'suffix-less'} file"
         )
     return kind
@@ -76,11 +80,43 @@ def bvh_motion(path: Path) -> Motion:
                   str(path))  # fmt: skip
 
 
+def gltf_motion(path: Path) -> Motion:
+    """The first animation of a glTF file's first skin as a :class:`Motion`: one frame per
+    key marker (a puppetcli export) or per key time of the animation; the bind pose alone
+    when the file has no animation."""
+    g = read_gltf(Path(path))
+    joints = skin_joints(g, 0)
+    rest_rots = quat_from_matrix(joints.bind)
+    if not g.doc.animations:
+        times, labels = np.zeros(1), ("rest",)
+        worlds = [g.world()]
+    else:
+        markers = (g.doc.animations[0].extras or {}).get("markers")
+        if isinstance(markers, list) and markers and all(_is_marker(m) for m in markers):
+            times = np.array([float(m["time"]) for m in markers])
+            labels = tuple(str(m.get("label", "")) for m in markers)
+        else:
+            times = g.animation_times(0)
+            labels = tuple(f"{t:.3f} s" for t in times)
+        worlds = [g.world(g.sample(0, float(t))) for t in times]
+    world = np.array(worlds)[:, joints.nodes]
+    return Motion(joints.names, joints.parents, joints.bind[:, :3, 3], rest_rots,
+                  world[..., :3, 3], quat_from_matrix(world), times, labels, str(path))  # fmt: skip
+
+
+def _is_marker(m: object) -> bool:
+    return isinstance(m, dict) and isinstance(m.get("time"), (int, float))
+
+
 def file_rig(path: Path, kind: str, say: Callable[[str], None]) -> RigSpec:
     """The rig of a file that carries its own skeleton: a BVH file (``rig from-bvh``'s rig,
-    its unit inferred) or a rig file itself."""
+    its unit inferred), a glTF file (``rig from-gltf``'s) or a rig file itself."""
     if kind == "rig":
         return load_rig(Path(path))
+    if kind == "gltf":
+        g = read_gltf(Path(path))
+        text = rig_text_from_gltf(g, 0, Path(path).stem, "", str(Path(path).resolve()))
+        return rig_from_text(text, f"<rig of {path}>")
     bvh = read_bvh(Path(path))
     unit = infer_unit(bvh)
     say(f"note: {path}: {unit.note()}")
@@ -99,8 +135,9 @@ def key_poses(
 ) -> list[Pose]:
     """The poses of a keyframes.json, BVH or rig file (``kind`` from :func:`input_kind`);
     ``frames`` picks a BVH file's frames."""
-    if kind == "bvh":
-        return motion_poses(bvh_motion(path), skel, spec, frames, say)
+    if kind in ("bvh", "gltf"):
+        motion = bvh_motion(path) if kind == "bvh" else gltf_motion(path)
+        return motion_poses(motion, skel, spec, frames, say)
     if kind == "rig":
         rest = np.tile(quat.IDENTITY, (len(skel.names), 1))
         return [Pose(skel.head0, skel.tail0, rest, "rest", 0.0)]

@@ -46,7 +46,8 @@ __all__ = [
 
 SOLVER_METHODS = ("auto", "pgs", "hybrid", "direct", "reference")
 DEFAULT_DENSITY = 1000.0  # kg/m³, water: a plausible body density
-TOP_KEYS = ("name", "gravity", "ground", "root", "friction", "solver", "defaults", "bones", "props")
+TOP_KEYS = ("name", "gravity", "ground", "root", "friction", "solver", "defaults", "bones", "props",
+            "character")  # fmt: skip
 DEFAULTS_KEYS = ("shape", "density", "joint")
 BONE_KEYS = (
     "name",
@@ -67,8 +68,13 @@ PROP_SHAPE_KINDS = ("sphere", "box")  # a capsule needs a bone's length
 
 
 def load_rig(path: Path) -> RigSpec:
-    """Read and validate a rig file; raises ``RigError``."""
-    return _rig_from_document(load_file(path, RigError))
+    """Read and validate a rig file; raises ``RigError``.  A ``character`` file is relative
+    to the rig's folder."""
+    spec = _rig_from_document(load_file(path, RigError))
+    if spec.character is not None:
+        gltf = Path(path).parent / spec.character[0]
+        spec = replace(spec, character=(str(gltf), spec.character[1]))
+    return spec
 
 
 def rig_from_text(text: str, source: str) -> RigSpec:
@@ -134,7 +140,14 @@ def _rig_from_document(doc: Node) -> RigSpec:
         props=top.read("props", lambda node: _read_props(node, bone_lines), ()),
         bone_friction=top.read("friction", Node.non_negative, 0.6),
         solver=replace(SolverSpec(), **top.read("solver", solver_overrides, {})),
+        character=top.read("character", _read_character, None),
     )
+
+
+def _read_character(node: Node) -> tuple[str, int]:
+    """``character: {gltf: FILE, skin: N}``: the glTF file the rig was made from."""
+    fields = node.mapping(("gltf", "skin"), required=("gltf",), what="a mapping gltf, skin")
+    return fields["gltf"].string("a file name"), fields.read("skin", lambda n: n.integer(0), 0)
 
 
 def _read_ground(node: Node) -> GroundSpec:

@@ -87,21 +87,23 @@ def bone_geometry(
     return BoneGeometry(unique_names(names), np.asarray(parents), head, tail, radius, collide)
 
 
-def rig_text(name: str, bones: BoneGeometry, note: str, source: str) -> str:
+def rig_text(
+    name: str, bones: BoneGeometry, note: str, source: str, extra: tuple[str, ...] = ()
+) -> str:
     """Rig YAML for ``bones`` (see the module docstring), checked by the rig loader;
-    ``source`` names the input in errors."""
+    ``source`` names the input in errors; ``extra``: more top-level lines."""
     if len(bones.names) > MAX_BONES:
         raise PuppetError(
             f"{source}: expected at most {MAX_BONES} joints (a rig's limit), "
             f"got {len(bones.names):,}"
         )
-    first = _yaml(name, bones, {}, note)
+    first = _yaml(name, bones, {}, note, extra)
     model = build_model(rig_from_text(first, f"<rig from {source}>"))
     nb = len(bones.names)
     factors = _joint_factors(
         bones, model.body_mass[:nb], model.body_pos0[:nb], model.body_inertia[:nb], model.options.h
     )
-    return _yaml(name, bones, factors, note)
+    return _yaml(name, bones, factors, note, extra)
 
 
 def unique_names(names: tuple[str, ...]) -> tuple[str, ...]:
@@ -150,12 +152,15 @@ def _vec(v: np.ndarray) -> str:
     return "[" + ", ".join(_num(x) for x in v) + "]"
 
 
-def _yaml(name: str, bones: BoneGeometry, factors: dict[int, float], note: str) -> str:
+def _yaml(
+    name: str, bones: BoneGeometry, factors: dict[int, float], note: str, extra: tuple[str, ...]
+) -> str:
     """The rig document; names are JSON strings, which YAML reads as double-quoted scalars."""
     low = np.minimum(bones.head[:, 1], bones.tail[:, 1]) - bones.radius
     joint = ", ".join(f"{k}: {_num(v)}" for k, v in JOINT.items())
     lines = [f"# {line}" for line in note.splitlines()] + [
         f"name: {json.dumps(name, ensure_ascii=False)}",
+        *extra,
         "root: fixed",
         f"ground: {{height: {_num(float(low.min()) - GROUND_GAP)}, friction: 0.8}}",
         "friction: 0.6",

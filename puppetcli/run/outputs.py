@@ -16,7 +16,7 @@ import tempfile
 from pathlib import Path
 
 from puppetcli.bvh.write import write_keys_bvh
-from puppetcli.gltf.write import write_keys_glb
+from puppetcli.gltf.export import write_glb
 from puppetcli.outputs import OutputError
 from puppetcli.render.camera import View
 from puppetcli.render.picture import remove_stale_keys, render_keys
@@ -51,8 +51,7 @@ def write_key_outputs(
             names.append("keyframes.bvh")
         if keys and gltf:
             interpolation = "STEP" if interpolate is None else "LINEAR"
-            write_keys_glb(stage / "keyframes.glb", Skeleton.from_spec(spec), keys, rig_name,
-                           fps, interpolation)  # fmt: skip
+            write_glb(stage / "keyframes.glb", spec, keys, fps, interpolation)
             names.append("keyframes.glb")
         if keys and render:
             render_keys(stage, Skeleton.from_spec(spec), keys, spec, view=view)
