@@ -14,7 +14,7 @@ from puppetcli.bvh.units import infer_unit
 from puppetcli.commands.options import SCALE, force_option
 from puppetcli.gltf.read import read_gltf
 from puppetcli.gltf.rig import rig_text_from_gltf
-from puppetcli.outputs import refuse_overwrite, write_text_atomic
+from puppetcli.outputs import make_parent, refuse_overwrite, write_text_atomic
 from puppetcli.rig.load import rig_from_text
 from solver.model import build_model
 
@@ -74,6 +74,7 @@ def from_bvh(
 
 def _write_rig(out: Path, text: str, what: str) -> None:
     model = build_model(rig_from_text(text, str(out)))
+    make_parent(out)
     write_text_atomic(out, text)
     click.echo(
         f"wrote {out}: {len(model.bone_names)} bones from {what}, {model.body_mass.sum():.3f} kg"

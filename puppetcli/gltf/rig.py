@@ -9,9 +9,10 @@ the joint with its largest weight.  A bone whose vertices form a capsule
 starting at its head (every vertex at the same distance r from the segment
 head → tail, tail found from the vertex furthest from the head, up to
 ``CAPSULE_MATCH``: a puppetcli export) gets that capsule exactly.  Otherwise its
-tail is the children's (``rig from-bvh``'s rule), or for a leaf, the vertex
-furthest from the head less the radius, and its radius is the 90th percentile
-of its vertices' distances from the segment head → tail.  A bone without
+tail is the children's (``rig from-bvh``'s rule), or for a leaf, along the
+vertices' main axis (their covariance's largest eigenvector, pointing from the
+head towards them) to the furthest of them less the radius; its radius is the
+90th percentile of its vertices' distances from the segment head → tail.  A bone without
 vertices falls back on ``rig from-bvh``'s radius (a fraction of its length);
 a leaf without vertices is a small sphere.  Masses, joints and the ground are
 ``puppetcli.rig.make``'s.
@@ -88,12 +89,13 @@ def _shape(
     tail = children_tail(k, heads, parents)
     if len(pts) < MIN_VERTICES:
         return (head if tail is None else tail), None
-    if tail is None:  # a leaf: towards its furthest vertex
-        reach = np.linalg.norm(pts - head, axis=1)
-        far = pts[int(np.argmax(reach))]
-        r = float(np.percentile(_segment_distance(pts, head, far), RADIUS_PERCENTILE))
-        length = max(float(reach.max()) - r, 0.0)
-        tail = head + (far - head) * (length / max(float(reach.max()), 1e-300))
+    if tail is None:  # a leaf: along its vertices' main axis, to where they end
+        axis = np.linalg.eigh(np.cov((pts - head).T))[1][:, -1]
+        axis = axis if float(np.mean(pts - head, axis=0) @ axis) >= 0.0 else -axis
+        length = float(np.max((pts - head) @ axis, initial=0.0))
+        r = float(np.percentile(_segment_distance(pts, head, head + length * axis),
+                                RADIUS_PERCENTILE))  # fmt: skip
+        return head + max(length - r, 0.0) * axis, r
     return tail, float(np.percentile(_segment_distance(pts, head, tail), RADIUS_PERCENTILE))
 
 
