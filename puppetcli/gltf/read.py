@@ -28,12 +28,14 @@ import numpy as np
 import pygltflib as gl
 
 from puppetcli.errors import PuppetError, shown
+from puppetcli.gltf.check import check_document
+from puppetcli.yamldoc import LARGEST
 from solver import quat
 
 __all__ = ["Gltf", "GltfError", "SkinJoints", "quat_from_matrix", "read_gltf", "skin_joints"]
 
 BIND_MATCH = 1e-5  # × skeleton size: the nodes' rest transforms are the bind pose
-_DTYPES = {
+_DTYPES = {  # the component types check.COMPONENTS allows
     gl.BYTE: np.int8, gl.UNSIGNED_BYTE: np.uint8, gl.SHORT: np.int16,
     gl.UNSIGNED_SHORT: np.uint16, gl.UNSIGNED_INT: np.uint32, gl.FLOAT: np.float32,
 }  # fmt: skip
@@ -57,34 +59,40 @@ class Gltf:
     def fail(self, where: str, expected: str, got: str) -> GltfError:
         return GltfError(f"{self.source}: {where}: expected {expected}, got {got}")
 
+    def check(self, where: str, expected: str, value: object) -> GltfError:
+        """``fail`` with a value shown short (what ``check_document`` raises)."""
+        return self.fail(where, expected, shown(value))
+
     def accessor(self, index: int) -> np.ndarray:
-        """Accessor ``index`` as float64 (count, width); normalized integers scaled to [0, 1]
-        or [−1, 1]."""
+        """Accessor ``index`` (checked by ``check_document``) as float64 (count, width);
+        normalized integers scaled to [0, 1] or [−1, 1]."""
         where = f"accessors[{index}]"
-        if not 0 <= index < len(self.doc.accessors):
-            raise self.fail(where, f"one of {len(self.doc.accessors)} accessors", "none")
         acc = self.doc.accessors[index]
         if acc.sparse is not None:
             raise self.fail(where, "a dense accessor", "a sparse one (not supported)")
-        dtype = np.dtype(_DTYPES.get(acc.componentType, np.float32)).newbyteorder("<")
-        width = _WIDTH.get(acc.type, 1)
-        if acc.bufferView is None:
+        dtype = np.dtype(_DTYPES[acc.componentType]).newbyteorder("<")
+        width = _WIDTH[acc.type]
+        if acc.bufferView is None or acc.count == 0:
             return np.zeros((acc.count, width))
         view = self.doc.bufferViews[acc.bufferView]
         data = self.buffers[view.buffer]
         start = (view.byteOffset or 0) + (acc.byteOffset or 0)
-        stride = view.byteStride or dtype.itemsize * width
-        end = start + stride * (acc.count - 1) + dtype.itemsize * width if acc.count else start
-        if end > min(len(data), (view.byteOffset or 0) + view.byteLength):
+        item = dtype.itemsize * width
+        stride = view.byteStride or item
+        end = start + stride * (acc.count - 1) + item
+        if stride < item or end > min(len(data), (view.byteOffset or 0) + view.byteLength):
             raise self.fail(where, f"{acc.count} items inside its buffer view", "too few bytes")
-        rows = np.lib.stride_tricks.as_strided(
-            np.frombuffer(data, dtype, offset=start, count=(end - start) // dtype.itemsize),
-            shape=(acc.count, width),
-            strides=(stride, dtype.itemsize),
-        )
-        out = np.array(rows, dtype=float)
-        if acc.normalized and acc.componentType in _NORMALIZED:
+        if start % dtype.itemsize or stride % dtype.itemsize:
+            raise self.fail(where, f"data aligned to {dtype.itemsize} bytes", "unaligned data")
+        flat = np.frombuffer(data, dtype, offset=start, count=(end - start) // dtype.itemsize)
+        step = stride // dtype.itemsize
+        rows = np.stack([flat[k : k + step * (acc.count - 1) + 1 : step] for k in range(width)], 1)
+        with np.errstate(invalid="ignore"):  # signalling NaNs: refused below
+            out = rows.astype(float)
+        if acc.normalized is True and acc.componentType in _NORMALIZED:
             out = np.maximum(out / _NORMALIZED[acc.componentType], -1.0)
+        if not np.all(np.abs(out) <= LARGEST):  # NaN fails too
+            raise self.fail(where, "finite numbers", shown(out[~(np.abs(out) <= LARGEST)][0]))
         return out
 
     def local_trs(self, i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray] | np.ndarray:
@@ -119,9 +127,12 @@ class Gltf:
                 chain.append(i)
                 i = parents[i]
             base = out[i] if i >= 0 and done[i] else np.eye(4)
-            for j in reversed(chain):
-                base = base @ self._local(j, (animated or {}).get(j, {}))
-                out[j], done[j] = base, True
+            with np.errstate(over="ignore", invalid="ignore"):  # checked below
+                for j in reversed(chain):
+                    base = base @ self._local(j, (animated or {}).get(j, {}))
+                    out[j], done[j] = base, True
+        if not np.all(np.abs(out) <= LARGEST):
+            raise self.fail("nodes", "transforms with finite world matrices", "an overflow")
         return out
 
     def _local(self, i: int, override: dict[str, np.ndarray]) -> np.ndarray:
@@ -155,6 +166,16 @@ class Gltf:
             values = self.accessor(sampler.output)
             if sampler.interpolation == "CUBICSPLINE":
                 values = values[1::3]  # (in-tangent, value, out-tangent) per key
+            width = {"translation": 3, "rotation": 4, "scale": 3}[path]
+            if len(times) == 0 or len(values) < len(times) or values.shape[1] != width:
+                raise self.fail(f"animations[{animation}].samplers[{channel.sampler}]",
+                                f"a {width}-vector per key time", "other output")  # fmt: skip
+            if path == "rotation" and not np.all(np.linalg.norm(values, axis=1) > 0.0):
+                raise self.fail(f"animations[{animation}].samplers[{channel.sampler}].output",
+                                "unit quaternions", "a zero quaternion")  # fmt: skip
+            if np.any(np.diff(times) < 0.0):
+                raise self.fail(f"animations[{animation}].samplers[{channel.sampler}].input",
+                                "increasing times", shown(times[:4].tolist()))  # fmt: skip
             value = _interpolate(times, values, t, sampler.interpolation, path == "rotation")
             if path == "rotation":
                 value = quat.normalize(value[[3, 0, 1, 2]])
@@ -193,10 +214,22 @@ def read_gltf(path: Path) -> Gltf:
         ) from None
     if doc is None:
         raise GltfError(f"{path}: expected a glTF 2.0 file, got no JSON chunk")
+    if not isinstance(doc.buffers, list):
+        raise GltfError(f"{path}: buffers: expected a list, got {shown(doc.buffers)}")
     buffers = []
     for k, buffer in enumerate(doc.buffers):
+        if not (isinstance(buffer.byteLength, int) and 0 <= buffer.byteLength <= 2**40):
+            raise GltfError(f"{path}: buffers[{k}].byteLength: expected a byte count, "
+                            f"got {shown(buffer.byteLength)}")  # fmt: skip
+        if buffer.uri is None and k > 0:
+            raise GltfError(f"{path}: buffers[{k}]: expected a uri (only the first buffer of a "
+                            "glb may be its binary chunk), got none")  # fmt: skip
         try:
-            data = doc.get_data_from_buffer_uri(buffer.uri)
+            data = (
+                doc.binary_blob()
+                if buffer.uri is None
+                else doc.get_data_from_buffer_uri(buffer.uri)
+            )
         except Exception as exc:
             raise GltfError(
                 f"{path}: buffers[{k}]: expected its data, got {type(exc).__name__}: "
@@ -208,7 +241,9 @@ def read_gltf(path: Path) -> Gltf:
                 f"got {0 if data is None else len(data)}"
             )
         buffers.append(bytes(data))
-    return Gltf(doc, buffers, str(path))
+    g = Gltf(doc, buffers, str(path))
+    check_document(doc, g.check)
+    return g
 
 
 @dataclass(frozen=True)
@@ -284,10 +319,16 @@ def _bind(g: Gltf, skin, order: list[int], skin_index: np.ndarray) -> np.ndarray
     rest = g.world()[order]
     if skin.inverseBindMatrices is None:
         return rest
-    ibm = g.accessor(skin.inverseBindMatrices).reshape(-1, 4, 4).transpose(0, 2, 1)
-    if len(ibm) < len(skin.joints):
-        raise g.fail("skins.inverseBindMatrices", f"{len(skin.joints)} matrices", str(len(ibm)))
-    bind = np.linalg.inv(ibm[skin_index])
+    where = f"accessors[{skin.inverseBindMatrices}]"
+    values = g.accessor(skin.inverseBindMatrices)
+    if values.shape[1] != 16 or len(values) < len(skin.joints):
+        raise g.fail(where, f"{len(skin.joints)} MAT4 inverse bind matrices", f"{len(values)} "
+                     f"of {values.shape[1]} numbers")  # fmt: skip
+    ibm = values.reshape(-1, 4, 4).transpose(0, 2, 1)[skin_index]
+    det = np.linalg.det(ibm[:, :3, :3])
+    if not np.all(np.abs(det) > 1e-12):
+        raise g.fail(where, "invertible inverse bind matrices", f"determinant {det.min():.3g}")
+    bind = np.linalg.inv(ibm)
     size = float(np.ptp(bind[:, :3, 3], axis=0).max()) if len(bind) > 1 else 1.0
     if np.abs(rest - bind).max() <= BIND_MATCH * max(size, 1e-12):
         return rest

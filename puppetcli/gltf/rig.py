@@ -50,9 +50,16 @@ def bone_vertices(g: Gltf, skin: int, joints: SkinJoints) -> list[np.ndarray]:
             a = prim.attributes
             if a.POSITION is None or a.JOINTS_0 is None or a.WEIGHTS_0 is None:
                 continue
-            pos = g.accessor(a.POSITION)
-            ids = g.accessor(a.JOINTS_0).astype(np.int64)
-            weights = g.accessor(a.WEIGHTS_0)
+            pos, ids, weights = (g.accessor(i) for i in (a.POSITION, a.JOINTS_0, a.WEIGHTS_0))
+            if (
+                pos.shape[1] != 3
+                or ids.shape[1] != 4
+                or weights.shape[1] != 4
+                or not (len(pos) == len(ids) == len(weights))
+            ):
+                raise g.fail(f"meshes[{node.mesh}]", "POSITION, JOINTS_0 and WEIGHTS_0 of one "
+                             "length (VEC3, VEC4, VEC4)", "other shapes")  # fmt: skip
+            ids = ids.astype(np.int64)
             top = ids[np.arange(len(ids)), np.argmax(weights, axis=1)]
             for s, k in order.items():
                 per_joint[k].append(pos[top == s])

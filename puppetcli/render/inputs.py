@@ -105,7 +105,8 @@ def gltf_motion(path: Path) -> Motion:
 
 
 def _is_marker(m: object) -> bool:
-    return isinstance(m, dict) and isinstance(m.get("time"), (int, float))
+    t = m.get("time") if isinstance(m, dict) else None
+    return isinstance(t, (int, float)) and abs(t) <= LARGEST  # NaN fails too
 
 
 def file_rig(path: Path, kind: str, say: Callable[[str], None]) -> RigSpec:

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import re
+import struct
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -51,6 +52,7 @@ class Seeds:
     bvh: Path
     trace: Path
     session: Path
+    glb: Path
 
     @classmethod
     def make(cls, folder: Path, run) -> Seeds:
@@ -59,14 +61,14 @@ class Seeds:
         script.write_text(SCRIPT)
         out, session = folder / "seed-out", folder / "seed.mcap"
         for args in (
-            ["pose", str(DOLL), str(script), "-o", str(out), "--force"],
+            ["pose", str(DOLL), str(script), "-o", str(out), "--force", "--gltf"],
             ["record", str(DOLL), str(script), "-o", str(session), "--force"],
         ):
             outcome = run(args)
             assert outcome.code == 0, (args, outcome.stderr, outcome.exception)
         return cls(
             DOLL, script, out / "keyframes.json", out / "keyframes.bvh", out / "trace.mcap",
-            session,
+            session, out / "keyframes.glb",
         )  # fmt: skip
 
 
@@ -240,6 +242,27 @@ def bvh_case(seeds: Seeds, rng: np.random.Generator, folder: Path) -> list[str]:
             "--size", "64x64", "--force"]  # fmt: skip
 
 
+def _glb_mutant(path: Path, rng: np.random.Generator) -> bytes:
+    """A glb with its JSON chunk's tree mutated (3 in 4), or its bytes."""
+    data = path.read_bytes()
+    if rng.random() >= 0.75:
+        return mutate_bytes(data, rng)
+    (size,) = struct.unpack_from("<I", data, 12)
+    doc = json.dumps(mutate_tree(json.loads(data[20 : 20 + size]), rng)).encode()
+    doc += b" " * (-len(doc) % 4)
+    body = struct.pack("<I4s", len(doc), b"JSON") + doc + data[20 + size :]
+    return struct.pack("<4sII", b"glTF", 2, 12 + len(body)) + body
+
+
+def gltf_case(seeds: Seeds, rng: np.random.Generator, folder: Path) -> list[str]:
+    glb = _write(folder, "in.glb", _glb_mutant(seeds.glb, rng))
+    pick = rng.random()
+    if pick < 0.4:
+        return ["rig", "from-gltf", str(glb), "-o", str(folder / "r.yaml"), "--force"]
+    rig = ["--rig", str(seeds.rig)] if pick < 0.7 else []
+    return ["render", str(glb), *rig, "-o", str(folder / "s.png"), "--size", "64x64", "--force"]
+
+
 def keys_case(seeds: Seeds, rng: np.random.Generator, folder: Path) -> list[str]:
     keys = _write(folder, "keyframes.json", _json_mutant(seeds.keys, rng))
     return ["render", str(keys), "--rig", str(seeds.rig), "-o", str(folder / "s.png"),
@@ -301,6 +324,7 @@ KINDS = {
     "session": session_case,
     "trace": trace_case,
     "bvh": bvh_case,
+    "gltf": gltf_case,
     "keys": keys_case,
     "preset": preset_case,
     "option": option_case,
