@@ -124,7 +124,8 @@ def command(
     if sheet is not None:
         ncols = min(cols if cols is not None else default_cols(len(poses)), len(poses))
         rows = _sheet(sheet, skel, poses, spec, frame_poses(skel, poses, spec, view, size), ncols)
-        lines.append(f"{sheet}: {len(poses)} panels, {ncols} × {rows}, "
+        panels = f"{len(poses)} panel" + ("s" if len(poses) != 1 else "")
+        lines.append(f"{sheet}: {panels}, {ncols} × {rows}, "
                      f"{view.name} view, {size[0]}x{size[1]} px each")  # fmt: skip
         facts["sheet"] = {"out": str(sheet), "panels": len(poses), "cols": ncols, "rows": rows}
     emit(facts, lines)

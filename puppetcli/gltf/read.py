@@ -21,6 +21,7 @@ precision (inverse bind matrices are float32).
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -206,7 +207,11 @@ def read_gltf(path: Path) -> Gltf:
     """Load a .glb or .gltf file and its buffers; a one-line GltfError when it cannot."""
     path = Path(path)
     try:
-        doc = gl.GLTF2().load(str(path))
+        with warnings.catch_warnings():
+            # pygltflib warns about chunks of unknown types, which glTF says to ignore (a
+            # missing binary chunk is caught below), and about versions, checked below.
+            warnings.simplefilter("ignore")
+            doc = gl.GLTF2().load(str(path))
     except Exception as exc:  # pygltflib raises anything from struct, json, dataclasses
         raise GltfError(
             f"{path}: expected a glTF 2.0 file (.glb or .gltf), got one that does not load "
@@ -214,6 +219,9 @@ def read_gltf(path: Path) -> Gltf:
         ) from None
     if doc is None:
         raise GltfError(f"{path}: expected a glTF 2.0 file, got no JSON chunk")
+    version = getattr(doc.asset, "version", None)
+    if not (isinstance(version, str) and version.startswith("2.")):
+        raise GltfError(f"{path}: asset.version: expected 2.x (glTF 2.0), got {shown(version)}")
     if not isinstance(doc.buffers, list):
         raise GltfError(f"{path}: buffers: expected a list, got {shown(doc.buffers)}")
     buffers = []

@@ -8,6 +8,7 @@ pygltflib code) for what a viewer shows of the written file; the Khronos validat
 from __future__ import annotations
 
 import json
+import struct
 from pathlib import Path
 
 import numpy as np
@@ -88,6 +89,8 @@ def test_posed_character_is_the_character_animated(character) -> None:
         n.get("name") for n in before.doc["nodes"]
     ]
     assert after.doc["skins"][0]["joints"] == before.doc["skins"][0]["joints"]
+    for a, b in zip(after.doc["nodes"], before.doc["nodes"], strict=True):  # the rest pose
+        assert all(a.get(k) == b.get(k) for k in ("translation", "rotation", "scale", "children"))
     prim = after.doc["meshes"][0]["primitives"][0]
     pos = after.accessor(prim["attributes"]["POSITION"])
     assert np.array_equal(pos, before.accessor(prim["attributes"]["POSITION"]))
@@ -165,3 +168,25 @@ def test_bad_gltf_input_is_one_line(tmp_path) -> None:
     assert result.stderr.strip() == (
         f"error: {tmp_path / 'arm.glb'}: --skin: expected a skin index from 0 to 0, got 3"
     )
+
+
+def test_a_gltf_with_its_buffer_in_a_file(tmp_path) -> None:
+    """The same character as .gltf + .bin gives the same bones as the .glb, and its posed
+    keyframes.glb carries the buffer inside (valid, no file beside it needed)."""
+    write_character(tmp_path / "arm.glb")
+    data = (tmp_path / "arm.glb").read_bytes()
+    (size,) = struct.unpack_from("<I", data, 12)
+    doc = json.loads(data[20 : 20 + size])
+    doc["buffers"][0]["uri"] = "arm.bin"
+    (tmp_path / "arm.bin").write_bytes(data[20 + size + 8 :])
+    (tmp_path / "arm.gltf").write_text(json.dumps(doc))
+    run("rig", "from-gltf", tmp_path / "arm.glb", "-o", tmp_path / "a.yaml")
+    run("rig", "from-gltf", tmp_path / "arm.gltf", "-o", tmp_path / "b.yaml")
+    a, b = (yaml.safe_load((tmp_path / n).read_text())["bones"] for n in ("a.yaml", "b.yaml"))
+    assert a == b
+    (tmp_path / "pull.yaml").write_text(PULL)
+    run("pose", tmp_path / "b.yaml", tmp_path / "pull.yaml", "-o", tmp_path / "out", "--gltf",
+        "--no-trace", "--no-render")  # fmt: skip
+    out = tmp_path / "out" / "keyframes.glb"
+    assert "uri" not in read_glb(out).doc["buffers"][0]
+    assert problems(validate(out)[str(out)]) == []

@@ -121,7 +121,7 @@ def test_input_errors(tmp_path: Path, keyfile: Path) -> None:
     text = tmp_path / "pose.txt"
     text.write_text("x")
     assert (
-        "expected keyframes.json, a .bvh file, a trace .mcap or a rig .yaml, got a .txt file"
+        "expected keyframes.json, a .bvh or .glb file, a trace .mcap or a rig .yaml, got a .txt"
         in usage_error(run(str(text), "--rig", str(DOLL), *out))
     )
     corrupt = tmp_path / "trace.mcap"
