@@ -25,6 +25,7 @@ COMMANDS = {
     "record": "puppetcli.commands.record",
     "live": "puppetcli.commands.live",
     "daemon": "puppetcli.commands.daemon",
+    "feel": "puppetcli.commands.feel",
 }
 HELP = {
     "validate": "Check a rig file and summarise what its simulation needs.",
@@ -32,8 +33,9 @@ HELP = {
     "bench": "Measure steps per second of the solvers on example scenes.",
     "stress": "Check that extreme rigs and inputs simulate stably.",
     "render": "Draw poses: a contact sheet of keys, or a video of a trace.",
-    "rig": "Make rigs from other formats (rig from-bvh FILE.bvh -o RIG.yaml).",
-    "convert": "Run a manipulation script and write the motion as BVH.",
+    "rig": "Make rigs from other formats (rig from-bvh FILE.bvh, rig from-gltf FILE.glb).",
+    "convert": "Run a manipulation script and write the motion as BVH or glTF.",
+    "feel": "Measure how a rig's joints feel: effort, retention, spring-back, creep, hold.",
     "record": "Turn a script into the session a SPIDAR-G device would record (.mcap).",
     "live": "Pose the doll by hand in the browser, recorded as a session (.mcap).",
     "daemon": "Show or stop the warm processes that make later commands start fast.",

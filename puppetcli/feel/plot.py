@@ -1,0 +1,97 @@
+"""Bend-and-release curves as PNG (OpenCV only): the joint's angle against time, measured
+(solid) and as the isolated joint would do it (dashed), per axis; a vertical line at the
+release.  One picture per joint (``joint_png``) and an overview of every joint
+(``overview_png``)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import cv2
+import numpy as np
+
+from puppetcli.feel.measure import JointFeel, isolated_curve
+
+__all__ = ["joint_png", "overview_png"]
+
+PANEL = (300, 480)  # (height, width) px of one joint's plot
+MARGIN = (40, 56, 24, 36)  # top, left, right, bottom
+COLOURS = {"swing": (180, 119, 31), "twist": (14, 127, 255)}  # BGR
+_GREY, _BLACK, _WHITE = (225, 225, 225), (40, 40, 40), (255, 255, 255)
+_FONT = cv2.FONT_HERSHEY_SIMPLEX
+
+
+def _ticks(lo: float, hi: float, count: int = 5) -> np.ndarray:
+    """Round tick values (1, 2 or 5 × 10^k apart) covering [lo, hi]."""
+    raw = (hi - lo) / count if hi > lo else 1.0
+    step = 10.0 ** math.floor(math.log10(raw))
+    step *= next(m for m in (1, 2, 5, 10) if m * step >= raw)
+    return np.arange(math.floor(lo / step), math.ceil(hi / step) + 1) * step
+
+
+def _panel(joint: JointFeel, size: tuple[int, int]) -> np.ndarray:
+    h, w = size
+    top, left, right, bottom = MARGIN
+    img = np.full((h, w, 3), _WHITE, np.uint8)
+    curves = [(a, a.times, a.angles, isolated_curve(a)) for a in joint.axes]
+    t_max = max(float(t[-1]) for _, t, _, _ in curves)
+    values = np.concatenate([np.concatenate((y, p[1])) for _, _, y, p in curves])
+    values = values[np.isfinite(values)]
+    y_lo, y_hi = min(float(values.min()), 0.0), max(float(values.max()), 1.0)
+    xs, ys = _ticks(0.0, t_max), _ticks(y_lo, y_hi)
+    x0, x1, y0, y1 = 0.0, float(xs[-1]), float(ys[0]), float(ys[-1])
+
+    def px(t: np.ndarray, y: np.ndarray) -> np.ndarray:
+        u = left + (t - x0) / (x1 - x0) * (w - left - right)
+        v = h - bottom - (y - y0) / (y1 - y0) * (h - top - bottom)
+        return np.stack((u, v), axis=1).round().astype(np.int32)
+
+    for x in xs:
+        (p,) = px(np.array([x]), np.array([y0]))
+        cv2.line(img, (int(p[0]), top), (int(p[0]), h - bottom), _GREY, 1)
+        cv2.putText(img, f"{x:g}", (int(p[0]) - 8, h - bottom + 16), _FONT, 0.4, _BLACK, 1,
+                    cv2.LINE_AA)  # fmt: skip
+    for y in ys:
+        (p,) = px(np.array([x0]), np.array([y]))
+        cv2.line(img, (left, int(p[1])), (w - right, int(p[1])), _GREY, 1)
+        cv2.putText(img, f"{y:g}", (6, int(p[1]) + 4), _FONT, 0.4, _BLACK, 1, cv2.LINE_AA)
+    cv2.rectangle(img, (left, top), (w - right, h - bottom), _BLACK, 1)
+    for a, t, y, (tp, yp) in curves:
+        colour = COLOURS.get(a.axis, _BLACK)
+        cv2.polylines(img, [px(t, y)], False, colour, 2, cv2.LINE_AA)
+        dashed = px(tp, yp)
+        for k in range(0, len(dashed) - 1, 4):
+            cv2.polylines(img, [dashed[k : k + 3]], False, colour, 1, cv2.LINE_AA)
+    release = px(np.array([joint.axes[0].release]), np.array([y0]))[0]
+    cv2.line(img, (int(release[0]), top), (int(release[0]), h - bottom), _BLACK, 1)
+    cv2.putText(img, f"{joint.joint}: angle (deg) against time (s)", (left, top - 22), _FONT,
+                0.5, _BLACK, 1, cv2.LINE_AA)  # fmt: skip
+    legend = "  ".join(f"{a.axis}: retention {a.retention:.2f}" for a in joint.axes)
+    cv2.putText(img, legend + "   dashed: isolated joint", (left, top - 6), _FONT, 0.4,
+                _BLACK, 1, cv2.LINE_AA)  # fmt: skip
+    return img
+
+
+def _png(img: np.ndarray) -> bytes:
+    ok, data = cv2.imencode(".png", img)
+    if not ok:
+        raise RuntimeError("OpenCV could not encode a PNG")
+    return data.tobytes()
+
+
+def joint_png(joint: JointFeel) -> bytes:
+    """One joint's bend-and-release plot."""
+    return _png(_panel(joint, PANEL))
+
+
+def overview_png(joints: Sequence[JointFeel], cols: int = 4) -> bytes:
+    """Every joint's plot, small, in a grid."""
+    size = (PANEL[0] * 3 // 4, PANEL[1] * 3 // 4)
+    panels = [_panel(j, size) for j in joints]
+    rows = -(-len(panels) // cols)
+    sheet = np.full((rows * size[0], min(cols, len(panels)) * size[1], 3), _WHITE, np.uint8)
+    for k, p in enumerate(panels):
+        r, c = divmod(k, cols)
+        sheet[r * size[0] : (r + 1) * size[0], c * size[1] : (c + 1) * size[1]] = p
+    return _png(sheet)
