@@ -26,6 +26,7 @@ COMMANDS = {
     "live": "puppetcli.commands.live",
     "daemon": "puppetcli.commands.daemon",
     "feel": "puppetcli.commands.feel",
+    "fit": "puppetcli.commands.fit",
 }
 HELP = {
     "validate": "Check a rig file and summarise what its simulation needs.",
@@ -36,6 +37,7 @@ HELP = {
     "rig": "Make rigs from other formats (rig from-bvh FILE.bvh, rig from-gltf FILE.glb).",
     "convert": "Run a manipulation script and write the motion as BVH or glTF.",
     "feel": "Measure how a rig's joints feel: effort, retention, spring-back, creep, hold.",
+    "fit": "Choose joint coefficients for a feel (retention, spring-back, effort, yield).",
     "record": "Turn a script into the session a SPIDAR-G device would record (.mcap).",
     "live": "Pose the doll by hand in the browser, recorded as a session (.mcap).",
     "daemon": "Show or stop the warm processes that make later commands start fast.",

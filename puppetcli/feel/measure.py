@@ -144,8 +144,11 @@ def _run(model: Model, actions: tuple, pointer: np.ndarray, recorder: _Recorder)
     return recorder.array()
 
 
-def bend_run(model: Model, j: int, a: np.ndarray, angle: float, duration: float) -> np.ndarray:
-    """Rows (t, angle, joint torque, grip torque, filtered torque, yielded) of the bend."""
+def bend_run(
+    model: Model, j: int, a: np.ndarray, angle: float, duration: float, watch: float = WATCH
+) -> np.ndarray:
+    """Rows (t, angle, joint torque, grip torque, filtered torque, yielded) of the bend and
+    ``watch`` s after it."""
     iso = isolated_joint(model, j, a)
     flow = iso.dd if math.isfinite(iso.dd) else 0.0
     k = GRIP_FACTOR * max(iso.kf + (iso.df + flow) / duration, 10.0)
@@ -154,7 +157,7 @@ def bend_run(model: Model, j: int, a: np.ndarray, angle: float, duration: float)
                 damping=100.0, rot_stiffness=k, rot_damping=2.0 * k * model.options.h,
                 force_limit=1e6, torque_limit=1e6, position_only=False, line=0)  # fmt: skip
     actions = (grip, Rotate(axis=a, angle=angle, duration=duration, line=0),  # radians
-               Release(line=0), Wait(duration=WATCH, line=0))  # fmt: skip
+               Release(line=0), Wait(duration=watch, line=0))  # fmt: skip
     return _run(model, actions, model.bone_head0[b].copy(), _Recorder(model, j, a))
 
 
@@ -218,10 +221,14 @@ def _fit_decay(t: np.ndarray, y: np.ndarray, guess: float, line: bool) -> tuple:
 
 
 def measure_axis(
-    model: Model, j: int, name: str, a: np.ndarray, angle: float, duration: float
-) -> AxisFeel:
+    model: Model, j: int, name: str, a: np.ndarray, angle: float, duration: float,
+    quick: bool = False,
+) -> AxisFeel:  # fmt: skip
+    """One axis's measures; ``quick``: no creep run and a watch only long enough for the
+    retention and the spring-back (``fit`` uses it)."""
     iso = isolated_joint(model, j, a)
-    rows = bend_run(model, j, a, angle, duration)
+    watch = max(RETAIN, 5.0 * iso.springback_time) + 0.5 if quick else WATCH
+    rows = bend_run(model, j, a, angle, duration, min(watch, WATCH))
     t, theta = rows[:, 0], rows[:, 1]
     during = t <= duration + 1e-9
     k_rel = int(np.flatnonzero(during)[-1])
@@ -236,7 +243,7 @@ def measure_axis(
     onset = np.flatnonzero(rows[:, 5] > 0.5)
     torque_c = creep_torque(iso)
     creep = math.nan
-    if math.isfinite(torque_c):
+    if math.isfinite(torque_c) and not quick:
         crow = creep_run(model, j, a, torque_c, creep_time(iso))
         creep = _fit_decay(crow[:, 0], crow[:, 1], iso.springback_time, line=True)[3]
     feel = AxisFeel(
