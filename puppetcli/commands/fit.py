@@ -11,14 +11,19 @@ import click
 import numpy as np
 
 from puppetcli.commands.feel import _joint_indices
-from puppetcli.commands.options import ENGINE_OPTION, Number, force_option
+from puppetcli.commands.options import ENGINE_OPTION, YES_OPTION, Number, force_option
 from puppetcli.commands.report import JSON_OPTION, emit, progress_bar
 from puppetcli.errors import shown
 from puppetcli.feel.fit import NAMES, Solved, Target, fit_joint
+from puppetcli.feel.identify import identify, joint_series
 from puppetcli.feel.measure import axes, measure_axis
+from puppetcli.feel.plot import fit_png
 from puppetcli.feel.rigfile import rig_with_joints
-from puppetcli.outputs import make_parent, refuse_overwrite, write_text_atomic
+from puppetcli.mcap.session import is_session
+from puppetcli.mcap.trace import read_trace
+from puppetcli.outputs import atomic_path, make_parent, refuse_overwrite, write_text_atomic
 from puppetcli.rig.load import load_rig, rig_from_text
+from puppetcli.run.session_trace import session_trace
 from puppetcli.run.warmup import prepare_engine
 from solver.model import Model, build_model
 
@@ -62,10 +67,13 @@ def parse_target(text: str) -> Target:
 
 @click.command("fit")
 @click.argument("rig", type=click.Path(exists=True, dir_okay=False, path_type=Path))
+@click.argument(
+    "data", required=False, type=click.Path(exists=True, dir_okay=False, path_type=Path)
+)
 @click.option("-o", "--out", required=True, type=click.Path(dir_okay=False, path_type=Path),
               help="The rig to write (YAML).")  # fmt: skip
 @click.option(
-    "--target", "targets", multiple=True, required=True,
+    "--target", "targets", multiple=True,
     help="[JOINT.]NAME=VALUE[UNIT]: retention=0.9, springback=0.2s, effort=15N (at the bone's "
     "tip) or effort=4Nm, yield=8Nm; without JOINT. for every joint fitted.",
 )  # fmt: skip
@@ -79,21 +87,39 @@ def parse_target(text: str) -> Target:
               help="The bend the measures use, degrees (as feel).")  # fmt: skip
 @click.option("--time", "duration", type=Number(0.05, 10.0), default=1.0, show_default=True,
               help="Seconds the bend takes (as feel).")  # fmt: skip
+@click.option(
+    "--plot",
+    "plot_dir",
+    type=click.Path(file_okay=False, path_type=Path),
+    help="With DATA: write DIR/JOINT-fit.png, the angle and the fitted model's.",
+)
 @force_option("RIG2.yaml if it exists")
+@YES_OPTION
 @ENGINE_OPTION
 @JSON_OPTION
 def command(
-    rig: Path, out: Path, targets: tuple[str, ...], joints: tuple[str, ...], angle: float,
-    duration: float, force: bool, engine: str, as_json: bool,
+    rig: Path, data: Path | None, out: Path, targets: tuple[str, ...], joints: tuple[str, ...],
+    angle: float, duration: float, plot_dir: Path | None, force: bool, yes: bool, engine: str,
+    as_json: bool,
 ) -> None:  # fmt: skip
-    """Choose K_f, D_f, D_d and the yield torque of joints so they feel as targeted, and
-    write the rig with them.
+    """Choose K_f, D_f, D_d and the yield torque of joints, and write the rig with them:
+    for target measures (--target), or fitted to recorded DATA.
 
-    Each joint is solved with the three-element model's closed form, then refined by
-    simulating the rig (as `feel` measures it, on the swing axis) until every target is
-    met within 1 % or five passes are done.  The new rig has a comment above each fitted
-    bone with its targets and what is now measured.  See docs/feel.md.
+    With --target, each joint is solved with the three-element model's closed form, then
+    fitted to the targets as a simulation of the rig measures them (as `feel` does, on the
+    swing axis).  With DATA (a trace .mcap, or a session .mcap, replayed first), K_f, D_f
+    and D_d of each --joint are fitted by least squares to the joint's recorded angles and
+    torques, with 95 % intervals.  The new rig has a comment above each fitted bone.  See
+    docs/feel.md.
     """
+    if data is not None:
+        if targets:
+            raise click.UsageError("give --target or DATA, not both")
+        refuse_overwrite(out, force)
+        _fit_data(rig, data, out, joints, plot_dir, yes)
+        return
+    if not targets:
+        raise click.UsageError("nothing to fit to: give --target NAME=VALUE or a DATA file")
     parsed = [parse_target(t) for t in targets]
     refuse_overwrite(out, force)
     text = rig.read_text(encoding="utf-8")
@@ -128,6 +154,54 @@ def command(
     write_text_atomic(out, new_text)
     emit({"rig": str(rig), "out": str(out), "fits": rows},
          [_table(rows), f"wrote {out}: {len(results)} joints fitted"])  # fmt: skip
+
+
+def _fit_data(
+    rig: Path, data: Path, out: Path, joints: tuple[str, ...], plot_dir: Path | None, yes: bool
+) -> None:
+    """The data mode: every --joint fitted to DATA's angles and torques."""
+    if not joints:
+        raise click.UsageError("DATA needs --joint J (the joints to fit)")
+    spec = load_rig(rig)
+    model = build_model(spec)
+    wanted = _joint_indices(model.joint_names, joints)
+    trace = session_trace(data, spec, yes, read_trace) if is_session(data) else read_trace(data)
+    found, lines, comments = {}, [], {}
+    for j in wanted:
+        name = model.joint_names[j]
+        t, theta, tau = joint_series(trace, name, str(data))
+        start = tuple(
+            float(np.mean(c[j])) for c in (model.joint_kf, model.joint_df, model.joint_dd)
+        )
+        fit = identify(t, theta, tau, start, float(model.joint_yield[j]),
+                       model.options.yield_filter_time, name)  # fmt: skip
+        found[name] = fit
+        comments[name] = "fitted by `puppetcli fit` to " + data.name + ": " + ", ".join(
+            f"{k} {v:.4g} [{lo:.4g}, {hi:.4g}]"
+            for k, v, lo, hi in zip(("kf", "df", "dd"), (fit.kf, fit.df, fit.dd), fit.low,
+                                    fit.high, strict=True))  # fmt: skip
+        lines.append(f"{name}: {comments[name][len('fitted by `puppetcli fit` to '):]} "
+                     f"(95 %), residual {fit.rms:.3g} rad rms over {len(t)} steps, "
+                     f"{fit.flows} flowing")  # fmt: skip
+    text = rig.read_text(encoding="utf-8")
+    coefficients = {n: {"kf": f.kf, "df": f.df, "dd": f.dd} for n, f in found.items()}
+    new_text = rig_with_joints(text, coefficients, comments)
+    build_model(rig_from_text(new_text, str(out)))
+    make_parent(out)
+    write_text_atomic(out, new_text)
+    written = [str(out)]
+    if plot_dir is not None:
+        plot_dir.mkdir(parents=True, exist_ok=True)
+        for name, fit in found.items():
+            path = plot_dir / (re.sub(r"[^\w.-]+", "_", name) + "-fit.png")
+            with atomic_path(path) as tmp:
+                tmp.write_bytes(fit_png(name, fit))
+            written.append(str(path))
+    facts = {"rig": str(rig), "data": str(data), "out": str(out), "written": written,
+             "fits": {n: {"kf": f.kf, "df": f.df, "dd": f.dd, "low": f.low.tolist(),
+                          "high": f.high.tolist(), "rms": f.rms, "flowing_steps": f.flows,
+                          "fitted": list(f.fitted)} for n, f in found.items()}}  # fmt: skip
+    emit(facts, [*lines, *(f"wrote {w}" for w in written)])
 
 
 def _coefficients(s: Solved) -> dict[str, float]:

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import tempfile
 from pathlib import Path
 
 import click
@@ -10,7 +9,6 @@ import click
 from puppetcli.commands.options import SIZE, YES_OPTION, Number, force_option, view_option
 from puppetcli.commands.report import JSON_OPTION, emit, progress_bar
 from puppetcli.errors import shown
-from puppetcli.mcap.replay import load_replay, replay_traced
 from puppetcli.mcap.session import is_session
 from puppetcli.outputs import make_parent, refuse_overwrite
 from puppetcli.render.camera import RenderError, View
@@ -25,9 +23,8 @@ from puppetcli.render.picture import (
 from puppetcli.render.video import CODECS, frame_count
 from puppetcli.rig.load import load_rig
 from puppetcli.rig.skeleton import Skeleton
-from puppetcli.run.budget import check_budget, check_run, video_cost
-from puppetcli.run.runner import script_model
-from solver.model import build_model
+from puppetcli.run.budget import check_budget, video_cost
+from puppetcli.run.session_trace import session_trace
 
 
 @click.command("render")
@@ -185,16 +182,7 @@ def _check_request(
 
 def _session_poses(path: Path, spec, skel: Skeleton, yes: bool):
     """(every step, the keys) of a recorded session, replayed into a trace first."""
-    replay = load_replay(path, spec)
-    if replay.warning:
-        click.echo(f"warning: {replay.warning}", err=True)
-    model = script_model(build_model(spec), replay.script)
-    check_run(path, replay.script, model.options.h, len(spec.bones), yes, trace_every=1)
-    with tempfile.TemporaryDirectory() as tmp:
-        result = replay_traced(replay, model, Path(tmp) / "trace.mcap")
-        if result.error is not None:
-            raise result.error
-        return trace_poses(Path(tmp) / "trace.mcap", skel)
+    return session_trace(path, spec, yes, lambda trace: trace_poses(trace, skel))
 
 
 def _video(path: Path, skel, steps, spec, framing, fps: float, frames: int) -> int:

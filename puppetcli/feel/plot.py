@@ -13,7 +13,7 @@ import numpy as np
 
 from puppetcli.feel.measure import JointFeel, isolated_curve
 
-__all__ = ["joint_png", "overview_png"]
+__all__ = ["fit_png", "joint_png", "overview_png"]
 
 PANEL = (300, 480)  # (height, width) px of one joint's plot
 MARGIN = (40, 56, 24, 36)  # top, left, right, bottom
@@ -30,15 +30,21 @@ def _ticks(lo: float, hi: float, count: int = 5) -> np.ndarray:
     return np.arange(math.floor(lo / step), math.ceil(hi / step) + 1) * step
 
 
-def _panel(joint: JointFeel, size: tuple[int, int]) -> np.ndarray:
+def _lines(
+    title: str, note: str, series: list[tuple[np.ndarray, np.ndarray, tuple, bool]],
+    size: tuple[int, int], marks: tuple[float, ...] = (),
+) -> np.ndarray:  # fmt: skip
+    """A plot of ``series`` (t, y, BGR colour, dashed) with round ticks, vertical lines at
+    ``marks`` (times), a title and a note line."""
     h, w = size
     top, left, right, bottom = MARGIN
     img = np.full((h, w, 3), _WHITE, np.uint8)
-    curves = [(a, a.times, a.angles, isolated_curve(a)) for a in joint.axes]
-    t_max = max(float(t[-1]) for _, t, _, _ in curves)
-    values = np.concatenate([np.concatenate((y, p[1])) for _, _, y, p in curves])
+    t_max = max(float(t[-1]) for t, *_ in series if len(t))
+    values = np.concatenate([y for _, y, *_ in series])
     values = values[np.isfinite(values)]
-    y_lo, y_hi = min(float(values.min()), 0.0), max(float(values.max()), 1.0)
+    y_lo, y_hi = float(values.min()), float(values.max())
+    if y_hi - y_lo < 1e-12:
+        y_lo, y_hi = y_lo - 1.0, y_hi + 1.0
     xs, ys = _ticks(0.0, t_max), _ticks(y_lo, y_hi)
     x0, x1, y0, y1 = 0.0, float(xs[-1]), float(ys[0]), float(ys[-1])
 
@@ -48,29 +54,53 @@ def _panel(joint: JointFeel, size: tuple[int, int]) -> np.ndarray:
         return np.stack((u, v), axis=1).round().astype(np.int32)
 
     for x in xs:
-        (p,) = px(np.array([x]), np.array([y0]))
-        cv2.line(img, (int(p[0]), top), (int(p[0]), h - bottom), _GREY, 1)
-        cv2.putText(img, f"{x:g}", (int(p[0]) - 8, h - bottom + 16), _FONT, 0.4, _BLACK, 1,
-                    cv2.LINE_AA)  # fmt: skip
+        u = int(px(np.array([x]), np.array([y0]))[0, 0])
+        cv2.line(img, (u, top), (u, h - bottom), _GREY, 1)
+        cv2.putText(img, f"{x:g}", (u - 8, h - bottom + 16), _FONT, 0.4, _BLACK, 1, cv2.LINE_AA)
     for y in ys:
-        (p,) = px(np.array([x0]), np.array([y]))
-        cv2.line(img, (left, int(p[1])), (w - right, int(p[1])), _GREY, 1)
-        cv2.putText(img, f"{y:g}", (6, int(p[1]) + 4), _FONT, 0.4, _BLACK, 1, cv2.LINE_AA)
+        v = int(px(np.array([x0]), np.array([y]))[0, 1])
+        cv2.line(img, (left, v), (w - right, v), _GREY, 1)
+        cv2.putText(img, f"{y:g}", (4, v + 4), _FONT, 0.4, _BLACK, 1, cv2.LINE_AA)
     cv2.rectangle(img, (left, top), (w - right, h - bottom), _BLACK, 1)
-    for a, t, y, (tp, yp) in curves:
-        colour = COLOURS.get(a.axis, _BLACK)
-        cv2.polylines(img, [px(t, y)], False, colour, 2, cv2.LINE_AA)
-        dashed = px(tp, yp)
-        for k in range(0, len(dashed) - 1, 4):
-            cv2.polylines(img, [dashed[k : k + 3]], False, colour, 1, cv2.LINE_AA)
-    release = px(np.array([joint.axes[0].release]), np.array([y0]))[0]
-    cv2.line(img, (int(release[0]), top), (int(release[0]), h - bottom), _BLACK, 1)
-    cv2.putText(img, f"{joint.joint}: angle (deg) against time (s)", (left, top - 22), _FONT,
-                0.5, _BLACK, 1, cv2.LINE_AA)  # fmt: skip
-    legend = "  ".join(f"{a.axis}: retention {a.retention:.2f}" for a in joint.axes)
-    cv2.putText(img, legend + "   dashed: isolated joint", (left, top - 6), _FONT, 0.4,
-                _BLACK, 1, cv2.LINE_AA)  # fmt: skip
+    for t, y, colour, dashed in series:
+        points = px(t, y)
+        if not dashed:
+            cv2.polylines(img, [points], False, colour, 2, cv2.LINE_AA)
+            continue
+        for k in range(0, len(points) - 1, 4):
+            cv2.polylines(img, [points[k : k + 3]], False, colour, 1, cv2.LINE_AA)
+    for m in marks:
+        u = int(px(np.array([m]), np.array([y0]))[0, 0])
+        cv2.line(img, (u, top), (u, h - bottom), _BLACK, 1)
+    cv2.putText(img, title, (left, top - 22), _FONT, 0.5, _BLACK, 1, cv2.LINE_AA)
+    cv2.putText(img, note, (left, top - 6), _FONT, 0.4, _BLACK, 1, cv2.LINE_AA)
     return img
+
+
+def _panel(joint: JointFeel, size: tuple[int, int]) -> np.ndarray:
+    series = []
+    for a in joint.axes:
+        colour = COLOURS.get(a.axis, _BLACK)
+        t_iso, y_iso = isolated_curve(a)
+        series += [(a.times, a.angles, colour, False), (t_iso, y_iso, colour, True)]
+    legend = "  ".join(f"{a.axis}: retention {a.retention:.2f}" for a in joint.axes)
+    return _lines(f"{joint.joint}: angle (deg) against time (s)",
+                  legend + "   dashed: isolated joint", series, size,
+                  (joint.axes[0].release,))  # fmt: skip
+
+
+def fit_png(joint: str, fit) -> bytes:
+    """The fitted joint: its angle (on its busiest axis, degrees) as recorded (solid) and
+    as the fitted model gives it (dashed), and the residual (grey), against time."""
+    axis = int(np.argmax(np.var(fit.measured, axis=0)))
+    measured, model = np.degrees(fit.measured[:, axis]), np.degrees(fit.model[:, axis])
+    t = fit.times - fit.times[0]
+    series = [(t, measured, COLOURS["swing"], False), (t, model, COLOURS["twist"], True),
+              (t, measured - model, (150, 150, 150), False)]  # fmt: skip
+    note = (f"kf {fit.kf:.4g}  df {fit.df:.4g}  dd {fit.dd:.4g}  residual "
+            f"{np.degrees(fit.rms):.3g} deg rms   dashed: model, grey: residual")  # fmt: skip
+    return _png(_lines(f"{joint}: recorded and fitted angle (deg, axis {'xyz'[axis]})", note,
+                       series, PANEL))  # fmt: skip
 
 
 def _png(img: np.ndarray) -> bytes:

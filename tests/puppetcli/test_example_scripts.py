@@ -44,4 +44,5 @@ def test_example_script_passes_its_expectations(name, tmp_path):
 
 def test_every_script_file_is_exercised():
     on_disk = {p.stem for p in (ROOT / "scripts").glob("*.yaml")}
-    assert on_disk == set(DOLL_SCRIPTS) | {"creep"}
+    # identify_forearm: tests/puppetcli/feel/test_identify.py
+    assert on_disk == set(DOLL_SCRIPTS) | {"creep", "identify_forearm"}
