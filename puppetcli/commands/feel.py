@@ -3,20 +3,18 @@
 from __future__ import annotations
 
 import math
-import re
 from pathlib import Path
 
 import click
 
-from puppetcli.commands.options import ENGINE_OPTION, Number, force_option
+from puppetcli.commands.options import ENGINE_OPTION, Number, force_option, joint_indices
 from puppetcli.commands.report import JSON_OPTION, emit, progress_bar
 from puppetcli.feel.measure import measure_joint, rest_run
-from puppetcli.feel.plot import joint_png, overview_png
+from puppetcli.feel.plot import joint_png, overview_png, write_plots
 from puppetcli.feel.report import feel_csv, feel_json, feel_table
-from puppetcli.outputs import atomic_path, make_parent, refuse_overwrite, write_text_atomic
+from puppetcli.outputs import make_parent, refuse_overwrite, write_text_atomic
 from puppetcli.rig.load import load_rig
 from puppetcli.run.warmup import prepare_engine
-from puppetcli.yamldoc import did_you_mean
 from solver.model import build_model
 
 
@@ -69,7 +67,7 @@ def command(
     """
     spec = load_rig(rig)
     model = build_model(spec)
-    wanted = _joint_indices(model.joint_names, joints)
+    wanted = joint_indices(model.joint_names, joints)
     for out in (csv_path, plot_dir / "overview.png" if plot_dir else None):
         if out is not None:
             refuse_overwrite(out, force)
@@ -87,36 +85,9 @@ def command(
         write_text_atomic(csv_path, feel_csv(found))
         written.append(str(csv_path))
     if plot_dir is not None:
-        written += _plots(plot_dir, found)
+        pictures = {j.joint: joint_png(j) for j in found} | {"overview": overview_png(found)}
+        written += write_plots(plot_dir, pictures)
     facts = {"rig": str(rig), "angle": angle, "time": duration, "joints": feel_json(found),
              "written": written}  # fmt: skip
     lines = [feel_table(found)] + [f"wrote {w}" for w in written]
     emit(facts, lines)
-
-
-def _joint_indices(names: tuple[str, ...], asked: tuple[str, ...]) -> list[int]:
-    """Indices of the asked joints (all when none); a usage error names an unknown one."""
-    if not names:
-        raise click.UsageError("the rig has no joints to measure (one bone, root: fixed)")
-    for name in asked:
-        if name not in names:
-            raise click.BadParameter(
-                f"expected a joint of the rig, got {name!r}{did_you_mean(name, names)}",
-                param_hint="'--joint'",
-            )
-    return [names.index(n) for n in dict.fromkeys(asked)] or list(range(len(names)))
-
-
-def _plots(folder: Path, found) -> list[str]:
-    """DIR/JOINT.png for every joint measured and DIR/overview.png; the paths written."""
-    folder.mkdir(parents=True, exist_ok=True)
-    out = []
-    for joint in found:
-        path = folder / (re.sub(r"[^\w.-]+", "_", joint.joint) + ".png")
-        with atomic_path(path) as tmp:
-            tmp.write_bytes(joint_png(joint))
-        out.append(str(path))
-    path = folder / "overview.png"
-    with atomic_path(path) as tmp:
-        tmp.write_bytes(overview_png(found))
-    return [*out, str(path)]

@@ -10,19 +10,26 @@ from pathlib import Path
 import click
 import numpy as np
 
-from puppetcli.commands.feel import _joint_indices
-from puppetcli.commands.options import ENGINE_OPTION, YES_OPTION, Number, force_option
+from puppetcli.commands.options import (
+    ENGINE_OPTION,
+    YES_OPTION,
+    Number,
+    force_option,
+    joint_indices,
+)  # fmt: skip
 from puppetcli.commands.report import JSON_OPTION, emit, progress_bar
 from puppetcli.errors import shown
-from puppetcli.feel.fit import NAMES, Solved, Target, fit_joint
+from puppetcli.feel.fit import NAMES, Solved, Target, fit_joint, measured
 from puppetcli.feel.identify import identify, joint_series
-from puppetcli.feel.measure import axes, measure_axis
-from puppetcli.feel.plot import fit_png
+from puppetcli.feel.measure import AxisFeel, axes, measure_axis
+from puppetcli.feel.plot import fit_png, write_plots
+from puppetcli.feel.report import aligned
 from puppetcli.feel.rigfile import rig_with_joints
 from puppetcli.mcap.session import is_session
 from puppetcli.mcap.trace import read_trace
-from puppetcli.outputs import atomic_path, make_parent, refuse_overwrite, write_text_atomic
+from puppetcli.outputs import refuse_overwrite
 from puppetcli.rig.load import load_rig, rig_from_text
+from puppetcli.rig.make import write_rig
 from puppetcli.run.session_trace import session_trace
 from puppetcli.run.warmup import prepare_engine
 from solver.model import Model, build_model
@@ -126,7 +133,7 @@ def command(
     spec = load_rig(rig)
     base, _ = prepare_engine(build_model(spec), engine, rig)
     named = tuple(t.joint for t in parsed if t.joint)
-    wanted = _joint_indices(base.joint_names, joints or named)
+    wanted = joint_indices(base.joint_names, joints or named)
     a_rad = math.radians(angle)
 
     def build(j: int, solved: Solved) -> Model:
@@ -144,14 +151,12 @@ def command(
             before = measure_axis(base, j, "swing", a, a_rad, duration)
             solved = fit_joint(base, j, goals, a_rad, duration, build)
             results[base.joint_names[j]] = solved
-            rows += _rows(base.joint_names[j], goals, before, solved, parsed)
+            rows += _rows(base.joint_names[j], goals, before, solved)
             if tick:
                 tick(1)
     comments = {n: _comment(n, rows) for n in results}
     new_text = rig_with_joints(text, {n: _coefficients(s) for n, s in results.items()}, comments)
-    build_model(rig_from_text(new_text, str(out)))  # the rig written must load
-    make_parent(out)
-    write_text_atomic(out, new_text)
+    write_rig(out, new_text)
     emit({"rig": str(rig), "out": str(out), "fits": rows},
          [_table(rows), f"wrote {out}: {len(results)} joints fitted"])  # fmt: skip
 
@@ -164,7 +169,7 @@ def _fit_data(
         raise click.UsageError("DATA needs --joint J (the joints to fit)")
     spec = load_rig(rig)
     model = build_model(spec)
-    wanted = _joint_indices(model.joint_names, joints)
+    wanted = joint_indices(model.joint_names, joints)
     trace = session_trace(data, spec, yes, read_trace) if is_session(data) else read_trace(data)
     found, lines, comments = {}, [], {}
     for j in wanted:
@@ -176,27 +181,20 @@ def _fit_data(
         fit = identify(t, theta, tau, start, float(model.joint_yield[j]),
                        model.options.yield_filter_time, name)  # fmt: skip
         found[name] = fit
-        comments[name] = "fitted by `puppetcli fit` to " + data.name + ": " + ", ".join(
+        found_text = ", ".join(
             f"{k} {v:.4g} [{lo:.4g}, {hi:.4g}]"
             for k, v, lo, hi in zip(("kf", "df", "dd"), (fit.kf, fit.df, fit.dd), fit.low,
                                     fit.high, strict=True))  # fmt: skip
-        lines.append(f"{name}: {comments[name][len('fitted by `puppetcli fit` to '):]} "
-                     f"(95 %), residual {fit.rms:.3g} rad rms over {len(t)} steps, "
-                     f"{fit.flows} flowing")  # fmt: skip
+        comments[name] = f"fitted by `puppetcli fit` to {data.name}: {found_text}"
+        lines.append(f"{name}: {data.name}: {found_text} (95 %), residual {fit.rms:.3g} rad rms "
+                     f"over {len(t)} steps, {fit.flows} flowing")  # fmt: skip
     text = rig.read_text(encoding="utf-8")
     coefficients = {n: {"kf": f.kf, "df": f.df, "dd": f.dd} for n, f in found.items()}
     new_text = rig_with_joints(text, coefficients, comments)
-    build_model(rig_from_text(new_text, str(out)))
-    make_parent(out)
-    write_text_atomic(out, new_text)
+    write_rig(out, new_text)
     written = [str(out)]
     if plot_dir is not None:
-        plot_dir.mkdir(parents=True, exist_ok=True)
-        for name, fit in found.items():
-            path = plot_dir / (re.sub(r"[^\w.-]+", "_", name) + "-fit.png")
-            with atomic_path(path) as tmp:
-                tmp.write_bytes(fit_png(name, fit))
-            written.append(str(path))
+        written += write_plots(plot_dir, {f"{n}-fit": fit_png(n, f) for n, f in found.items()})
     facts = {"rig": str(rig), "data": str(data), "out": str(out), "written": written,
              "fits": {n: {"kf": f.kf, "df": f.df, "dd": f.dd, "low": f.low.tolist(),
                           "high": f.high.tolist(), "rms": f.rms, "flowing_steps": f.flows,
@@ -226,25 +224,10 @@ def _goals(model: Model, j: int, parsed: list[Target]) -> dict[str, float]:
     return goals
 
 
-def _rows(joint: str, goals: dict, before, solved: Solved, parsed) -> list[dict]:
-    measures = {"retention": "retention", "springback": "springback_time", "effort": "effort",
-                "yield": "flow_onset"}  # fmt: skip
-    out = []
-    for name, goal in goals.items():
-        out.append(
-            {
-                "joint": joint,
-                "target": name,
-                "goal": goal,
-                "before": getattr(before, measures[name]),
-                "after": getattr(solved.measured, measures[name]),
-                "kf": solved.kf,
-                "df": solved.df,
-                "dd": solved.dd,
-                "yield": solved.yield_,
-            }
-        )
-    return out
+def _rows(joint: str, goals: dict, before: AxisFeel, solved: Solved) -> list[dict]:
+    return [{"joint": joint, "target": name, "goal": goal, "before": measured(before, name),
+             "after": measured(solved.measured, name), "kf": solved.kf, "df": solved.df,
+             "dd": solved.dd, "yield": solved.yield_} for name, goal in goals.items()]  # fmt: skip
 
 
 def _comment(joint: str, rows: list[dict]) -> str:
@@ -256,6 +239,4 @@ def _comment(joint: str, rows: list[dict]) -> str:
 def _table(rows: list[dict]) -> str:
     head = ["joint", "target", "goal", "before", "after", "kf", "df", "dd", "yield"]
     body = [[r["joint"], r["target"]] + [f"{r[k]:.4g}" for k in head[2:]] for r in rows]
-    widths = [max(len(x[i]) for x in [head, *body]) for i in range(len(head))]
-    return "\n".join("  ".join(c.ljust(w) for c, w in zip(x, widths, strict=True)).rstrip()
-                     for x in [head, *body])  # fmt: skip
+    return aligned([head, *body])

@@ -15,6 +15,7 @@ from puppetcli.errors import PuppetError
 from puppetcli.render.camera import VIEWS, parse_size, parse_view
 from puppetcli.rig.load import STEP_RANGE
 from puppetcli.run.warmup import ENGINES
+from puppetcli.yamldoc import did_you_mean
 
 
 class Number(click.FloatRange):
@@ -107,3 +108,17 @@ YES_OPTION = click.option(
     help="Run even if the run is estimated to take over 10 minutes (refused otherwise).",
 )  # fmt: skip
 """``--yes``: accept a run that puppetcli.run.budget estimates as too long."""
+
+
+def joint_indices(names: tuple[str, ...], asked: tuple[str, ...]) -> list[int]:
+    """Indices of the ``--joint`` names asked (all joints when none); a usage error names an
+    unknown one."""
+    if not names:
+        raise click.UsageError("the rig has no joints to measure (one bone, root: fixed)")
+    for name in asked:
+        if name not in names:
+            raise click.BadParameter(
+                f"expected a joint of the rig, got {name!r}{did_you_mean(name, names)}",
+                param_hint="'--joint'",
+            )
+    return [names.index(n) for n in dict.fromkeys(asked)] or list(range(len(names)))

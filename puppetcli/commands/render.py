@@ -12,7 +12,14 @@ from puppetcli.errors import shown
 from puppetcli.mcap.session import is_session
 from puppetcli.outputs import make_parent, refuse_overwrite
 from puppetcli.render.camera import RenderError, View
-from puppetcli.render.inputs import OWN_SKELETON, file_rig, input_kind, key_poses, trace_poses
+from puppetcli.render.inputs import (
+    OWN_SKELETON,
+    file_rig,
+    input_kind,
+    key_poses,
+    read_own,
+    trace_poses,
+)  # fmt: skip
 from puppetcli.render.picture import (
     contact_sheet,
     default_cols,
@@ -97,14 +104,15 @@ def command(
     """
     kind = _check_request(input_path, sheet, video, force, rig, frames)
     say = lambda line: click.echo(line, err=True)  # noqa: E731
-    spec = load_rig(rig) if rig is not None else file_rig(input_path, kind, say)
+    parsed = read_own(input_path, kind)  # a .bvh or .glb: read once for its rig and poses
+    spec = load_rig(rig) if rig is not None else file_rig(input_path, kind, say, parsed)
     skel = Skeleton.from_spec(spec)
     if kind == "trace" and is_session(input_path):
         steps, poses = _session_poses(input_path, spec, skel, yes)
     elif kind == "trace":
         steps, poses = trace_poses(input_path, skel)
     else:
-        steps, poses = [], key_poses(input_path, kind, skel, spec, frames, say)
+        steps, poses = [], key_poses(input_path, kind, skel, spec, frames, say, parsed)
     if video is not None:  # refused before anything is written
         frames = frame_count([p.time for p in steps], fps)
         what = f"{frames:,} video frames at {fps:g} fps"

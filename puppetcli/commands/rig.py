@@ -14,9 +14,13 @@ from puppetcli.bvh.units import infer_unit
 from puppetcli.commands.options import SCALE, force_option
 from puppetcli.gltf.read import read_gltf
 from puppetcli.gltf.rig import rig_text_from_gltf
-from puppetcli.outputs import make_parent, refuse_overwrite, write_text_atomic
-from puppetcli.rig.load import rig_from_text
-from solver.model import build_model
+from puppetcli.outputs import refuse_overwrite
+from puppetcli.rig.make import write_rig
+
+RIG_OUT = click.option(
+    "-o", "--out", "out", required=True, type=click.Path(dir_okay=False, path_type=Path),
+    help="The rig file to write (YAML).",
+)  # fmt: skip
 
 
 @click.group("rig")
@@ -26,14 +30,7 @@ def command() -> None:
 
 @command.command("from-bvh")
 @click.argument("bvh_file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
-@click.option(
-    "-o",
-    "--out",
-    "out",
-    required=True,
-    type=click.Path(dir_okay=False, path_type=Path),
-    help="The rig file to write (YAML).",
-)
+@RIG_OUT
 @click.option(
     "--frame",
     type=click.IntRange(min=0),
@@ -73,9 +70,7 @@ def from_bvh(
 
 
 def _write_rig(out: Path, text: str, what: str) -> None:
-    model = build_model(rig_from_text(text, str(out)))
-    make_parent(out)
-    write_text_atomic(out, text)
+    model = write_rig(out, text)
     click.echo(
         f"wrote {out}: {len(model.bone_names)} bones from {what}, {model.body_mass.sum():.3f} kg"
     )
@@ -83,14 +78,7 @@ def _write_rig(out: Path, text: str, what: str) -> None:
 
 @command.command("from-gltf")
 @click.argument("gltf_file", type=click.Path(exists=True, dir_okay=False, path_type=Path))
-@click.option(
-    "-o",
-    "--out",
-    "out",
-    required=True,
-    type=click.Path(dir_okay=False, path_type=Path),
-    help="The rig file to write (YAML).",
-)
+@RIG_OUT
 @click.option(
     "--skin",
     type=click.IntRange(min=0),

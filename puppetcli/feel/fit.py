@@ -33,9 +33,15 @@ from puppetcli.feel.isolated import IsolatedJoint
 from puppetcli.feel.measure import RETAIN, AxisFeel, axes, isolated_joint, measure_axis
 from solver.model import Model
 
-__all__ = ["NAMES", "FitError", "Solved", "Target", "fit_joint", "solve_closed_form"]
+__all__ = [
+    "MEASURES", "NAMES", "FitError", "Solved", "Target", "fit_joint", "measured",
+    "solve_closed_form",
+]  # fmt: skip
 
-NAMES = ("retention", "springback", "effort", "yield")
+# target name → the AxisFeel measure it sets
+MEASURES = {"retention": "retention", "springback": "springback_time", "effort": "effort",
+            "yield": "flow_onset"}  # fmt: skip
+NAMES = tuple(MEASURES)
 REFINE = 5  # simulation passes at most
 DAMPING = 0.8  # share of a correction taken per pass
 MET = 0.01  # relative (retention: absolute) distance at which a target counts as met
@@ -68,14 +74,6 @@ class Solved:
     yield_: float
     measured: AxisFeel | None = None
     misses: dict[str, float] | None = None
-
-    @property
-    def joint(self) -> IsolatedJoint:
-        return IsolatedJoint(self.kf, self.df, self.dd, self.yield_)
-
-
-def _retention(joint: IsolatedJoint, angle: float, duration: float) -> float:
-    return joint.retention(joint.bend(angle, duration, steps=2000), RETAIN)
 
 
 def solve_closed_form(
@@ -136,9 +134,9 @@ def _describe(goals: dict[str, float]) -> str:
     return ", ".join(f"{n}={v:.4g}" for n, v in goals.items())
 
 
-def _measured(a: AxisFeel, name: str) -> float:
-    return {"retention": a.retention, "springback": a.springback_time, "effort": a.effort,
-            "yield": a.flow_onset}[name]  # fmt: skip
+def measured(a: AxisFeel, name: str) -> float:
+    """The measure of ``a`` that target ``name`` is about (``MEASURES``)."""
+    return float(getattr(a, MEASURES[name]))
 
 
 def _miss(name: str, measured: float, goal: float) -> float:
@@ -178,11 +176,11 @@ def fit_joint(
     def residuals(x: np.ndarray) -> np.ndarray:
         solved = coefficients(x)
         found = measure_axis(build(j, solved), j, "swing", a, angle, duration, quick=True)
-        misses = {n: _miss(n, _measured(found, n), g) for n, g in goals.items()}
+        misses = {n: _miss(n, measured(found, n), g) for n, g in goals.items()}
         tried.append(replace(solved, measured=found, misses=misses))
         out = []
         for n in free:
-            m = _measured(found, n)
+            m = measured(found, n)
             if not (math.isfinite(m) and m > -1.0):
                 return np.full(len(free), 1e3)
             out.append(m - goals[n] if n == "retention" else math.log(max(m, 1e-300) / goals[n]))

@@ -133,15 +133,19 @@ class _Recorder:
         return np.array(self.rows, dtype=float).reshape(-1, 6)
 
 
-def _run(model: Model, actions: tuple, pointer: np.ndarray, recorder: _Recorder) -> np.ndarray:
+def _run(model: Model, actions: tuple, on_step, pointer: np.ndarray | None = None):
+    """Run ``actions`` on the rig from rest, ``on_step`` called after every step (a
+    ``_Recorder`` is given the runner, to read the grip's wrench): the RunResult."""
+    extra = {} if pointer is None else {"pointer_start": pointer}
     script = Script(source="<feel>", h=None, duration=None, gravity=True, actions=actions,
-                    pointer_start=pointer)  # fmt: skip
-    runner = Runner(script_model(model, script), script, on_step=recorder)
-    recorder.runner = runner
+                    **extra)  # fmt: skip
+    runner = Runner(script_model(model, script), script, on_step=on_step)
+    if isinstance(on_step, _Recorder):
+        on_step.runner = runner
     result = runner.run()
     if result.error is not None:
         raise result.error
-    return recorder.array()
+    return result
 
 
 def bend_run(
@@ -158,7 +162,9 @@ def bend_run(
                 force_limit=1e6, torque_limit=1e6, position_only=False, line=0)  # fmt: skip
     actions = (grip, Rotate(axis=a, angle=angle, duration=duration, line=0),  # radians
                Release(line=0), Wait(duration=watch, line=0))  # fmt: skip
-    return _run(model, actions, model.bone_head0[b].copy(), _Recorder(model, j, a))
+    recorder = _Recorder(model, j, a)
+    _run(model, actions, recorder, model.bone_head0[b].copy())
+    return recorder.array()
 
 
 def creep_torque(iso: IsolatedJoint) -> float:
@@ -177,7 +183,9 @@ def creep_run(model: Model, j: int, a: np.ndarray, torque: float, duration: floa
     b = model.joint_bone[j]
     push = Push(bone=model.bone_names[b], force=np.zeros(3), torque=torque * a,
                 point=np.zeros(3), duration=duration, line=0)  # fmt: skip
-    return _run(model, (push,), model.bone_head0[b].copy(), _Recorder(model, j, a))
+    recorder = _Recorder(model, j, a)
+    _run(model, (push,), recorder)
+    return recorder.array()
 
 
 def rest_run(model: Model) -> tuple[np.ndarray, np.ndarray]:
@@ -186,17 +194,11 @@ def rest_run(model: Model) -> tuple[np.ndarray, np.ndarray]:
     first: list[np.ndarray] = []
 
     def watch(state) -> None:
-        nonlocal yielded
-        yielded |= state.joint_yielded
+        yielded[:] |= state.joint_yielded
         if not first:
             first.append(joint_rotations(model, state))
 
-    script = Script(source="<feel>", h=None, duration=None, gravity=True,
-                    actions=(Wait(duration=HOLD, line=0),))  # fmt: skip
-    runner = Runner(script_model(model, script), script, on_step=watch)
-    result = runner.run()
-    if result.error is not None:
-        raise result.error
+    result = _run(model, (Wait(duration=HOLD, line=0),), watch)
     drift = np.linalg.norm(joint_rotations(model, result.state) - first[0], axis=1)
     return drift, yielded
 

@@ -1,4 +1,4 @@
-"""Bend-and-release curves as PNG (OpenCV only): the joint's angle against time, measured
+"""Bend-and-release curves as pictures (OpenCV only): the joint's angle against time, measured
 (solid) and as the isolated joint would do it (dashed), per axis; a vertical line at the
 release.  One picture per joint (``joint_png``) and an overview of every joint
 (``overview_png``)."""
@@ -6,14 +6,17 @@ release.  One picture per joint (``joint_png``) and an overview of every joint
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Sequence
+from pathlib import Path
 
 import cv2
 import numpy as np
 
 from puppetcli.feel.measure import JointFeel, isolated_curve
+from puppetcli.render.picture import write_png
 
-__all__ = ["fit_png", "joint_png", "overview_png"]
+__all__ = ["fit_png", "joint_png", "overview_png", "write_plots"]
 
 PANEL = (300, 480)  # (height, width) px of one joint's plot
 MARGIN = (40, 56, 24, 36)  # top, left, right, bottom
@@ -89,7 +92,7 @@ def _panel(joint: JointFeel, size: tuple[int, int]) -> np.ndarray:
                   (joint.axes[0].release,))  # fmt: skip
 
 
-def fit_png(joint: str, fit) -> bytes:
+def fit_png(joint: str, fit) -> np.ndarray:
     """The fitted joint: its angle (on its busiest axis, degrees) as recorded (solid) and
     as the fitted model gives it (dashed), and the residual (grey), against time."""
     axis = int(np.argmax(np.var(fit.measured, axis=0)))
@@ -99,24 +102,17 @@ def fit_png(joint: str, fit) -> bytes:
               (t, measured - model, (150, 150, 150), False)]  # fmt: skip
     note = (f"kf {fit.kf:.4g}  df {fit.df:.4g}  dd {fit.dd:.4g}  residual "
             f"{np.degrees(fit.rms):.3g} deg rms   dashed: model, grey: residual")  # fmt: skip
-    return _png(_lines(f"{joint}: recorded and fitted angle (deg, axis {'xyz'[axis]})", note,
-                       series, PANEL))  # fmt: skip
+    return _lines(f"{joint}: recorded and fitted angle (deg, axis {'xyz'[axis]})", note,
+                  series, PANEL)  # fmt: skip
 
 
-def _png(img: np.ndarray) -> bytes:
-    ok, data = cv2.imencode(".png", img)
-    if not ok:
-        raise RuntimeError("OpenCV could not encode a PNG")
-    return data.tobytes()
+def joint_png(joint: JointFeel) -> np.ndarray:
+    """One joint's bend-and-release plot (BGR)."""
+    return _panel(joint, PANEL)
 
 
-def joint_png(joint: JointFeel) -> bytes:
-    """One joint's bend-and-release plot."""
-    return _png(_panel(joint, PANEL))
-
-
-def overview_png(joints: Sequence[JointFeel], cols: int = 4) -> bytes:
-    """Every joint's plot, small, in a grid."""
+def overview_png(joints: Sequence[JointFeel], cols: int = 4) -> np.ndarray:
+    """Every joint's plot, small, in a grid (BGR)."""
     size = (PANEL[0] * 3 // 4, PANEL[1] * 3 // 4)
     panels = [_panel(j, size) for j in joints]
     rows = -(-len(panels) // cols)
@@ -124,4 +120,16 @@ def overview_png(joints: Sequence[JointFeel], cols: int = 4) -> bytes:
     for k, p in enumerate(panels):
         r, c = divmod(k, cols)
         sheet[r * size[0] : (r + 1) * size[0], c * size[1] : (c + 1) * size[1]] = p
-    return _png(sheet)
+    return sheet
+
+
+def write_plots(folder: Path, pictures: dict[str, np.ndarray]) -> list[str]:
+    """Each picture as ``folder/NAME.png`` (a joint's name made a safe file name); the paths
+    written."""
+    folder.mkdir(parents=True, exist_ok=True)
+    out = []
+    for name, img in pictures.items():
+        path = folder / (re.sub(r"[^\w.-]+", "_", name) + ".png")
+        write_png(path, img)
+        out.append(str(path))
+    return out

@@ -10,7 +10,7 @@ from collections.abc import Sequence
 
 from puppetcli.feel.measure import AxisFeel, JointFeel
 
-__all__ = ["COLUMNS", "feel_csv", "feel_json", "feel_table"]
+__all__ = ["COLUMNS", "aligned", "feel_csv", "feel_json", "feel_table"]
 
 # (key, heading, unit, format, has a prediction)
 COLUMNS = (
@@ -36,6 +36,13 @@ def _rows(joints: Sequence[JointFeel]) -> list[tuple[JointFeel, AxisFeel]]:
     return [(j, a) for j in joints for a in j.axes]
 
 
+def aligned(rows: Sequence[Sequence[str]]) -> str:
+    """Rows of cells as text, each column as wide as its widest cell, two spaces apart."""
+    widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
+    return "\n".join("  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip()
+                     for r in rows)  # fmt: skip
+
+
 def feel_table(joints: Sequence[JointFeel]) -> str:
     """The measures as text: per joint and axis, measured / isolated joint."""
     head = ["joint", "axis"] + [f"{h} ({u})" if u else h for _, h, u, _, _ in COLUMNS]
@@ -46,9 +53,7 @@ def feel_table(joints: Sequence[JointFeel]) -> str:
             measured = _fmt(fmt, getattr(a, key))
             cells.append(f"{measured} / {_fmt(fmt, a.isolated[key])}" if predicted else measured)
         body.append(cells)
-    widths = [max(len(r[i]) for r in [head, *body]) for i in range(len(head))]
-    lines = ["  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip()
-             for r in [head, *body]]  # fmt: skip
+    lines = aligned([head, *body]).splitlines()
     holds = [f"{j.joint} {j.hold_rest:.3g}°" + (" (gravity makes it flow)" if j.gravity_yields
                                                   else "") for j in joints]  # fmt: skip
     return "\n".join(

@@ -78,15 +78,16 @@ def character_motion(
                 m[:3, 3] = bone.head
                 world[i] = m
             else:
-                world[i] = (world[parents[i]] if parents[i] >= 0 else np.eye(4)) @ rest_local[i]
+                world[i] = _world_or_eye(world, parents[i]) @ rest_local[i]
         for i, j in position.items():
-            local = np.linalg.inv(world[parents[i]] if parents[i] >= 0 else np.eye(4)) @ world[i]
+            local = np.linalg.inv(_world_or_eye(world, parents[i])) @ world[i]
             trans[k, j] = local[:3, 3]
             rot[k, j] = quat_from_matrix(local)
     return [int(n) for n in joints.nodes], trans, continuous(rot)
 
 
-def _world_or_eye(world: np.ndarray, i: int) -> np.ndarray:
+def _world_or_eye(world, i: int) -> np.ndarray:
+    """``world[i]``, the identity for no node (−1)."""
     return world[i] if i >= 0 else np.eye(4)
 
 

@@ -14,14 +14,22 @@ import math
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
 import pygltflib as gl
 
 from puppetcli.yamldoc import LARGEST
 
-__all__ = ["COMPONENTS", "MAX_COUNT", "TYPES", "check_document"]
+__all__ = ["COMPONENTS", "DTYPES", "MAX_COUNT", "TYPES", "WIDTHS", "check_document"]
 
-COMPONENTS = (gl.BYTE, gl.UNSIGNED_BYTE, gl.SHORT, gl.UNSIGNED_SHORT, gl.UNSIGNED_INT, gl.FLOAT)
-TYPES = ("SCALAR", "VEC2", "VEC3", "VEC4", "MAT2", "MAT3", "MAT4")
+# glTF's accessor component types (as numpy types) and element types (as widths): the ones
+# it defines, which the readers and the writer share.
+DTYPES = {
+    gl.BYTE: np.int8, gl.UNSIGNED_BYTE: np.uint8, gl.SHORT: np.int16,
+    gl.UNSIGNED_SHORT: np.uint16, gl.UNSIGNED_INT: np.uint32, gl.FLOAT: np.float32,
+}  # fmt: skip
+WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
+COMPONENTS = tuple(DTYPES)
+TYPES = tuple(WIDTHS)
 INTERPOLATIONS = (None, "LINEAR", "STEP", "CUBICSPLINE")
 MAX_COUNT = 10**8  # items of one accessor
 _LISTS = {"nodes": gl.Node, "accessors": gl.Accessor, "bufferViews": gl.BufferView,

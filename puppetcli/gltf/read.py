@@ -22,25 +22,20 @@ precision (inverse bind matrices are float32).
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 import pygltflib as gl
 
 from puppetcli.errors import PuppetError, shown
-from puppetcli.gltf.check import check_document
+from puppetcli.gltf.check import DTYPES, WIDTHS, check_document
 from puppetcli.yamldoc import LARGEST
 from solver import quat
 
 __all__ = ["Gltf", "GltfError", "SkinJoints", "quat_from_matrix", "read_gltf", "skin_joints"]
 
 BIND_MATCH = 1e-5  # × skeleton size: the nodes' rest transforms are the bind pose
-_DTYPES = {  # the component types check.COMPONENTS allows
-    gl.BYTE: np.int8, gl.UNSIGNED_BYTE: np.uint8, gl.SHORT: np.int16,
-    gl.UNSIGNED_SHORT: np.uint16, gl.UNSIGNED_INT: np.uint32, gl.FLOAT: np.float32,
-}  # fmt: skip
-_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
 _NORMALIZED = {gl.BYTE: 127.0, gl.UNSIGNED_BYTE: 255.0, gl.SHORT: 32767.0,
                gl.UNSIGNED_SHORT: 65535.0}  # fmt: skip
 
@@ -51,11 +46,14 @@ class GltfError(PuppetError):
 
 @dataclass
 class Gltf:
-    """A loaded glTF document and its buffers' bytes; ``source`` names it in messages."""
+    """A loaded glTF document and its buffers' bytes; ``source`` names it in messages;
+    ``decoded``: accessors read so far (sampling an animation at many times reads each
+    once)."""
 
     doc: gl.GLTF2
     buffers: list[bytes]
     source: str
+    decoded: dict[int, np.ndarray] = field(default_factory=dict, repr=False)
 
     def fail(self, where: str, expected: str, got: str) -> GltfError:
         return GltfError(f"{self.source}: {where}: expected {expected}, got {got}")
@@ -66,13 +64,20 @@ class Gltf:
 
     def accessor(self, index: int) -> np.ndarray:
         """Accessor ``index`` (checked by ``check_document``) as float64 (count, width);
-        normalized integers scaled to [0, 1] or [−1, 1]."""
+        normalized integers scaled to [0, 1] or [−1, 1].  Read-only (it is kept)."""
+        if index not in self.decoded:
+            out = self._decode(index)
+            out.flags.writeable = False
+            self.decoded[index] = out
+        return self.decoded[index]
+
+    def _decode(self, index: int) -> np.ndarray:
         where = f"accessors[{index}]"
         acc = self.doc.accessors[index]
         if acc.sparse is not None:
             raise self.fail(where, "a dense accessor", "a sparse one (not supported)")
-        dtype = np.dtype(_DTYPES[acc.componentType]).newbyteorder("<")
-        width = _WIDTH[acc.type]
+        dtype = np.dtype(DTYPES[acc.componentType]).newbyteorder("<")
+        width = WIDTHS[acc.type]
         if acc.bufferView is None or acc.count == 0:
             return np.zeros((acc.count, width))
         view = self.doc.bufferViews[acc.bufferView]

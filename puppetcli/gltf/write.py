@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 import pygltflib as gl
 
+from puppetcli.gltf.check import DTYPES, WIDTHS
 from puppetcli.gltf.mesh import skeleton_mesh
 from puppetcli.outputs import atomic_path
 from puppetcli.rig.skeleton import Skeleton
@@ -45,7 +46,7 @@ __all__ = [
 
 INTERPOLATIONS = ("STEP", "LINEAR")
 BONE_RGB = (217, 191, 140)  # sRGB of the renderer's bone colour
-_TYPES = {1: "SCALAR", 3: "VEC3", 4: "VEC4", 16: "MAT4"}
+_TYPES = {WIDTHS[t]: t for t in ("SCALAR", "VEC3", "VEC4", "MAT4")}  # by width, as written
 
 
 class Blob:
@@ -58,9 +59,7 @@ class Blob:
             bounds: bool = False) -> int:  # fmt: skip
         """Append ``array`` (n, k) as one accessor; its index.  ``bounds``: min/max
         (required for positions and animation inputs)."""
-        dtype = {gl.FLOAT: np.float32, gl.UNSIGNED_SHORT: np.uint16,
-                 gl.UNSIGNED_INT: np.uint32, gl.UNSIGNED_BYTE: np.uint8}[component]  # fmt: skip
-        values = np.ascontiguousarray(array, dtype=dtype)
+        values = np.ascontiguousarray(array, dtype=DTYPES[component])
         flat = values.reshape(len(values), -1)
         self.data += bytes(-len(self.data) % 4)
         offset = len(self.data)

@@ -30,12 +30,12 @@ from pathlib import Path
 
 import numpy as np
 
-from puppetcli.bvh.model import forward_kinematics
+from puppetcli.bvh.model import Bvh, forward_kinematics
 from puppetcli.bvh.read import read_bvh
 from puppetcli.bvh.rig import rig_text_from_bvh
 from puppetcli.bvh.units import infer_unit
 from puppetcli.errors import shown
-from puppetcli.gltf.read import quat_from_matrix, read_gltf, skin_joints
+from puppetcli.gltf.read import Gltf, quat_from_matrix, read_gltf, skin_joints
 from puppetcli.gltf.rig import rig_text_from_gltf
 from puppetcli.mcap.trace import PUPPET_FRAME, read_trace
 from puppetcli.render.camera import RenderError
@@ -48,7 +48,10 @@ from puppetcli.yamldoc import LARGEST
 from solver import quat
 from solver.spec import RigSpec
 
-__all__ = ["INPUT_KINDS", "OWN_SKELETON", "file_rig", "input_kind", "key_poses", "trace_poses"]
+__all__ = [
+    "INPUT_KINDS", "OWN_SKELETON", "file_rig", "input_kind", "key_poses", "read_own",
+    "trace_poses",
+]  # fmt: skip
 
 INPUT_KINDS = {".json": "keyframes", ".bvh": "bvh", ".glb": "gltf", ".gltf": "gltf",
                ".mcap": "trace", ".yaml": "rig", ".yml": "rig"}  # fmt: skip
@@ -67,24 +70,29 @@ def input_kind(path: Path) -> str:
     return kind
 
 
-def bvh_motion(path: Path) -> Motion:
+def read_own(path: Path, kind: str) -> Bvh | Gltf | None:
+    """A BVH or glTF file read once, for both its rig and its poses (None for other kinds)."""
+    if kind == "bvh":
+        return read_bvh(Path(path))
+    return read_gltf(Path(path)) if kind == "gltf" else None
+
+
+def bvh_motion(bvh: Bvh) -> Motion:
     """Every frame of a BVH file as a :class:`Motion` (frame f labelled ``frame f``, as
     ``rig from-bvh --frame f`` counts them)."""
-    bvh = read_bvh(Path(path))
     rest_heads, rest_rots = bvh.forward_kinematics(None)
     trans, rot = bvh.poses()
     heads, rots = forward_kinematics(bvh.parents, trans, rot)
     nf = bvh.nframes
     return Motion(bvh.names, bvh.parents, rest_heads, rest_rots, heads, rots,
                   np.arange(nf) * float(bvh.frame_time), tuple(f"frame {f}" for f in range(nf)),
-                  str(path))  # fmt: skip
+                  bvh.source)  # fmt: skip
 
 
-def gltf_motion(path: Path) -> Motion:
+def gltf_motion(g: Gltf) -> Motion:
     """The first animation of a glTF file's first skin as a :class:`Motion`: one frame per
     key marker (a puppetcli export) or per key time of the animation; the bind pose alone
     when the file has no animation."""
-    g = read_gltf(Path(path))
     joints = skin_joints(g, 0)
     rest_rots = quat_from_matrix(joints.bind)
     if not g.doc.animations:
@@ -101,7 +109,7 @@ def gltf_motion(path: Path) -> Motion:
         worlds = [g.world(g.sample(0, float(t))) for t in times]
     world = np.array(worlds)[:, joints.nodes]
     return Motion(joints.names, joints.parents, joints.bind[:, :3, 3], rest_rots,
-                  world[..., :3, 3], quat_from_matrix(world), times, labels, str(path))  # fmt: skip
+                  world[..., :3, 3], quat_from_matrix(world), times, labels, g.source)  # fmt: skip
 
 
 def _is_marker(m: object) -> bool:
@@ -109,16 +117,20 @@ def _is_marker(m: object) -> bool:
     return isinstance(t, (int, float)) and abs(t) <= LARGEST  # NaN fails too
 
 
-def file_rig(path: Path, kind: str, say: Callable[[str], None]) -> RigSpec:
+def file_rig(
+    path: Path, kind: str, say: Callable[[str], None], parsed: Bvh | Gltf | None = None
+) -> RigSpec:
     """The rig of a file that carries its own skeleton: a BVH file (``rig from-bvh``'s rig,
-    its unit inferred), a glTF file (``rig from-gltf``'s) or a rig file itself."""
+    its unit inferred), a glTF file (``rig from-gltf``'s) or a rig file itself; ``parsed``:
+    the file as ``read_own`` read it, if it was."""
     if kind == "rig":
         return load_rig(Path(path))
+    parsed = parsed or read_own(path, kind)
     if kind == "gltf":
-        g = read_gltf(Path(path))
+        g = parsed
         text = rig_text_from_gltf(g, 0, Path(path).stem, "", str(Path(path).resolve()))
         return rig_from_text(text, f"<rig of {path}>")
-    bvh = read_bvh(Path(path))
+    bvh = parsed
     unit = infer_unit(bvh)
     say(f"note: {path}: {unit.note()}")
     if unit.warning:
@@ -133,11 +145,14 @@ def key_poses(
     spec: RigSpec,
     frames: Sequence[int] = (),
     say: Callable[[str], None] = lambda line: None,
+    parsed: Bvh | Gltf | None = None,
 ) -> list[Pose]:
-    """The poses of a keyframes.json, BVH or rig file (``kind`` from :func:`input_kind`);
-    ``frames`` picks a BVH file's frames."""
+    """The poses of a keyframes.json, BVH, glTF or rig file (``kind`` from
+    :func:`input_kind`); ``frames`` picks a BVH or glTF file's frames; ``parsed``: the file
+    as ``read_own`` read it, if it was."""
     if kind in ("bvh", "gltf"):
-        motion = bvh_motion(path) if kind == "bvh" else gltf_motion(path)
+        parsed = parsed or read_own(path, kind)
+        motion = bvh_motion(parsed) if kind == "bvh" else gltf_motion(parsed)
         return motion_poses(motion, skel, spec, frames, say)
     if kind == "rig":
         rest = np.tile(quat.IDENTITY, (len(skel.names), 1))

@@ -30,14 +30,18 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
 from puppetcli.errors import PuppetError
+from puppetcli.outputs import make_parent, write_text_atomic
 from puppetcli.rig.load import MAX_BONES, rig_from_text
-from solver.model import build_model
+from solver.model import Model, build_model
 
-__all__ = ["BoneGeometry", "bone_geometry", "children_tail", "rig_text", "unique_names"]
+__all__ = [
+    "BoneGeometry", "bone_geometry", "children_tail", "rig_text", "unique_names", "write_rig",
+]  # fmt: skip
 
 RADIUS_FRACTION = 0.15  # capsule radius / bone length
 RADIUS_FLOOR = 0.005  # minimum radius / skeleton size
@@ -85,6 +89,15 @@ def bone_geometry(
     radius = np.maximum(radius, floor)
     collide = length >= COLLIDE_LENGTH * size
     return BoneGeometry(unique_names(names), np.asarray(parents), head, tail, radius, collide)
+
+
+def write_rig(path: Path, text: str) -> Model:
+    """Write rig ``text`` to ``path`` (its folder made, atomically) once it loads and builds;
+    the built model."""
+    model = build_model(rig_from_text(text, str(path)))
+    make_parent(Path(path))
+    write_text_atomic(Path(path), text)
+    return model
 
 
 def rig_text(

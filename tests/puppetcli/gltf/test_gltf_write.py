@@ -137,7 +137,8 @@ def test_hierarchy_and_rest_pose(posed) -> None:
         parent = glb.doc["nodes"][parents[i]]["name"] if i in parents else None
         assert parent == b.get("parent")
         assert np.allclose(rest[i][:3, 3], b["head"], atol=1e-12)
-        assert np.allclose(ibm[s] @ rest[i], np.eye(4), atol=1e-6)  # float32 matrices
+        # float32 matrices: measured 5.2e-8
+        assert np.allclose(ibm[s] @ rest[i], np.eye(4), rtol=0, atol=2e-7)
 
 
 def test_convert_samples_at_the_rate(posed) -> None:
