@@ -16,7 +16,7 @@ import numpy as np
 from puppetcli.feel.measure import JointFeel, isolated_curve
 from puppetcli.render.picture import write_png
 
-__all__ = ["fit_png", "joint_png", "overview_png", "write_plots"]
+__all__ = ["fit_png", "joint_png", "overview_png", "task_png", "write_plots"]
 
 PANEL = (300, 480)  # (height, width) px of one joint's plot
 MARGIN = (40, 56, 24, 36)  # top, left, right, bottom
@@ -104,6 +104,30 @@ def fit_png(joint: str, fit) -> np.ndarray:
             f"{np.degrees(fit.rms):.3g} deg rms   dashed: model, grey: residual")  # fmt: skip
     return _lines(f"{joint}: recorded and fitted angle (deg, axis {'xyz'[axis]})", note,
                   series, PANEL)  # fmt: skip
+
+
+PALETTE = ((180, 119, 31), (14, 127, 255), (44, 160, 44), (40, 39, 214))  # BGR, per run
+PALETTE_NAMES = ("blue", "orange", "green", "red")
+
+
+def task_png(task: str, runs: Sequence) -> np.ndarray:
+    """A task posed by each run (``TaskRun``): the worst joint's error (deg) against time
+    (s) through its keys, one colour per run, the 2° line dashed."""
+    series, legend, t_end = [], [], 0.0
+    for k, run in enumerate(runs):
+        t0, times, worst = 0.0, [], []
+        for key in run.keys:
+            trace = np.array(key.trace, dtype=float).reshape(-1, 2)
+            times.append(t0 + trace[:, 0])
+            worst.append(np.degrees(trace[:, 1]))
+            t0 += key.duration
+        series.append((np.concatenate(times), np.concatenate(worst), PALETTE[k % 4], False))
+        legend.append(run.run)
+        t_end = max(t_end, t0)
+    series.append((np.array([0.0, t_end]), np.array([2.0, 2.0]), _BLACK, True))
+    return _lines(f"{task}: worst joint error (deg) against time (s)",
+                  "  ".join(f"{PALETTE_NAMES[k % 4]}: {n}"
+                            for k, n in enumerate(legend)), series, PANEL)  # fmt: skip
 
 
 def joint_png(joint: JointFeel) -> np.ndarray:

@@ -17,10 +17,15 @@ attenuated (and the QP attenuates even feasible ones: s trades accuracy for low 
 
 ``capacity`` answers what the strings can make at all: for each axis and sign the largest
 pure force (zero torque, zero other components) or pure torque, by linear programming.
+``least_capacity`` is the force and the torque the device can display whichever way they
+point: the least such maximum over the 26 directions of a cube's faces, edges and
+corners (an edge or corner direction needs several strings at once, and is often the
+weakest).
 """
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -36,6 +41,7 @@ __all__ = [
     "TensionResult",
     "TensionWeights",
     "capacity",
+    "least_capacity",
     "motor_volts",
     "solve_tensions",
 ]
@@ -182,3 +188,24 @@ def capacity(
                 direction[offset + axis] = sign
                 out[block][mark + label] = _max_along(a, direction, preset.t_min, preset.t_max)
     return out
+
+
+def _cube_directions() -> np.ndarray:
+    """The 26 unit vectors toward a cube's faces, edges and corners."""
+    cube = np.array([d for d in itertools.product((-1.0, 0.0, 1.0), repeat=3) if any(d)])
+    return cube / np.linalg.norm(cube, axis=1)[:, None]
+
+
+def least_capacity(preset: DevicePreset) -> tuple[float, float]:
+    """(force N, torque N·m) the device can display at home in every direction: the least
+    of the largest pure force (torque) over the 26 cube directions."""
+    a = structure_matrix(preset, np.zeros(3), quat.IDENTITY)
+    found = []
+    for offset in (0, 3):
+        least = np.inf
+        for d in _cube_directions():
+            direction = np.zeros(6)
+            direction[offset : offset + 3] = d
+            least = min(least, _max_along(a, direction, preset.t_min, preset.t_max))
+        found.append(float(least))
+    return found[0], found[1]
