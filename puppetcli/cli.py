@@ -27,6 +27,7 @@ COMMANDS = {
     "daemon": "puppetcli.commands.daemon",
     "feel": "puppetcli.commands.feel",
     "fit": "puppetcli.commands.fit",
+    "batch": "puppetcli.commands.batch",
 }
 HELP = {
     "validate": "Check a rig file and summarise what its simulation needs.",
@@ -41,6 +42,7 @@ HELP = {
     "record": "Turn a script into the session a SPIDAR-G device would record (.mcap).",
     "live": "Pose the doll by hand in the browser, recorded as a session (.mcap).",
     "daemon": "Show or stop the warm processes that make later commands start fast.",
+    "batch": "Run many scripts or sessions at once, locally or on a Dask cluster; resumable.",
 }
 
 

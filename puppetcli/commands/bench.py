@@ -98,6 +98,12 @@ SOLVER_CHOICES = [*SOLVERS, "reference"]
     "with and without its trace) against the bare in-place stepper on the same inputs "
     "instead (--h: steps to run it at; default the script's own and 1 ms).",
 )
+@click.option(
+    "--batch",
+    is_flag=True,
+    help="Measure `puppetcli batch` instead: jobs per minute and steps/s on 1 and 2 local "
+    "workers, and its overhead per job against pose run in-process (puppetcli/bench/batch.py).",
+)
 @click.option("--quick", is_flag=True, help="With --precision: fewer settings and steps (CI).")
 @click.option(
     "--out",
@@ -118,6 +124,7 @@ def command(
     skips: bool,
     live: bool,
     pose: bool,
+    batch: bool,
     quick: bool,
     out_dir: Path | None,
     as_json: bool,
@@ -160,6 +167,12 @@ def command(
         default = source == click.core.ParameterSource.DEFAULT
         rows = measure_pose([None, 0.001] if default else list(steps_h))
         emit({"pose": rows_json(rows)}, [format_pose(rows)])
+        return
+    if batch:
+        from puppetcli.bench.batch import format_batch, measure_batch
+
+        rows, figures = measure_batch()
+        emit({"batch": rows_json(rows), **figures}, [format_batch(rows, figures)])
         return
     if skips:
         from puppetcli.bench.skips import format_skips, measure_skips

@@ -19,19 +19,13 @@ from puppetcli.commands.options import (
 )
 from puppetcli.commands.report import JSON_OPTION, emit, progress_bar
 from puppetcli.errors import ScriptError
-from puppetcli.mcap.replay import Replay, load_replay
 from puppetcli.outputs import prepare_outdir
 from puppetcli.render.camera import View
 from puppetcli.rig.load import load_rig
 from puppetcli.run.budget import BudgetWatch, check_run
-from puppetcli.run.outputs import write_key_outputs
-from puppetcli.run.runner import Runner, RunResult, script_model
-from puppetcli.run.trace import RunTrace
+from puppetcli.run.pose import PoseOptions, plan_pose, run_pose, write_pose
+from puppetcli.run.runner import RunResult
 from puppetcli.run.warmup import prepare_engine
-from puppetcli.script.load import load_script
-from solver.model import build_model
-
-OUTPUTS = ["keyframes.json", "keyframes.bvh", "keyframes.glb", "trace.mcap", "sheet.png", "keys"]
 
 
 @click.command("pose")
@@ -113,31 +107,23 @@ def command(
     Failed `expect` lines are printed and also end with exit status 1.
     """
     spec = load_rig(rig)
-    replay = load_replay(script, spec) if script.suffix.lower() == ".mcap" else None
-    if replay is not None and replay.warning:
-        click.echo(f"warning: {replay.warning}", err=True)
-    plan = replay.script if replay is not None else load_script(script, spec)
-    model = script_model(build_model(spec), plan)
-    if step is not None:
-        model = model.with_options(h=step)
-    steps = check_run(script, plan, model.options.h, len(spec.bones), yes,
+    planned = plan_pose(spec, script, step)
+    if planned.replay is not None and planned.replay.warning:
+        click.echo(f"warning: {planned.replay.warning}", err=True)
+    options = PoseOptions(
+        trace_every=trace_every, no_trace=no_trace, step=step, no_render=no_render,
+        order=order, fps=fps, scale=scale,
+        interpolate=None if interpolate == "none" else interpolate, gltf=gltf, view=view,
+    )  # fmt: skip
+    steps = check_run(script, planned.plan, planned.model.options.h, len(spec.bones), yes,
                       trace_every=None if no_trace else trace_every)  # fmt: skip
-    skipped = {"trace.mcap"} if no_trace else set()
-    skipped |= {"sheet.png", "keys"} if no_render else set()
-    skipped |= set() if gltf else {"keyframes.glb"}
-    prepare_outdir(outdir, [name for name in OUTPUTS if name not in skipped], force)
-    model, upgrade = prepare_engine(model, engine, rig)
+    prepare_outdir(outdir, options.outputs(), force)
+    planned.model, upgrade = prepare_engine(planned.model, engine, rig)
     with progress_bar("simulating", round(steps)) as tick:
         watch = BudgetWatch(script, steps, yes, tick)
-        result = _run(model, plan, outdir, trace_every, no_trace, replay, upgrade, watch)
-    written = write_key_outputs(
-        outdir, spec, model.name, list(result.keys), render=not no_render, order=order.upper(),
-        fps=fps, scale=scale, interpolate=None if interpolate == "none" else interpolate,
-        view=view, gltf=gltf,
-    )  # fmt: skip
-    if not no_trace:
-        written.append(outdir / "trace.mcap")
-    _report(result, model.options.h, written)
+        result = run_pose(planned, outdir, options, upgrade, watch)
+    written = write_pose(outdir, planned, result, options)
+    _report(result, planned.model.options.h, written)
     if result.error is not None:
         raise result.error
     failed = [r for r in result.expectations if not r.passed]
@@ -147,23 +133,6 @@ def command(
         raise ScriptError(
             f"{script}: {len(failed)} of {len(result.expectations)} expectations failed"
         )
-
-
-def _run(
-    model, plan, outdir: Path, trace_every: int, no_trace: bool, replay: Replay | None, upgrade,
-    progress: BudgetWatch,
-) -> RunResult:  # fmt: skip
-    if replay is not None:
-        runner = replay.runner(model, progress=progress)
-    else:
-        runner = Runner(model, plan, progress=progress)
-    runner.upgrade = upgrade
-    if no_trace:
-        return runner.run()
-    path, spidar = outdir / "trace.mcap", replay is not None
-    with RunTrace(path, model, plan, trace_every, runner.pointer_on, spidar) as trace:
-        runner.trace = trace
-        return runner.run()
 
 
 def _report(result: RunResult, h: float, written: list[Path]) -> None:

@@ -8,10 +8,10 @@ import math
 
 import yaml
 
-__all__ = ["rig_with_joints"]
+__all__ = ["plain_document", "rig_with_joints"]
 
 
-def _plain(doc: object) -> object:
+def plain_document(doc: object) -> object:
     """The document without YAML's shared nodes (an anchor's bones get their own copies)."""
     return json.loads(json.dumps(doc))
 
@@ -22,7 +22,7 @@ def rig_with_joints(
     """``text`` (a valid rig) with ``joints`` (bone → {kf, df, dd, yield}) set; the other
     joint keys (limits) and everything else kept.  YAML comments of the original are lost
     (the document is re-written); ``comments`` (bone → text) go above those bones."""
-    doc = _plain(yaml.safe_load(text))
+    doc = plain_document(yaml.safe_load(text))
     for bone in doc["bones"]:
         if bone["name"] in joints:
             own = dict(bone.get("joint") or {})
