@@ -35,7 +35,8 @@ def _worst(errors: np.ndarray, joints: Sequence[str]) -> str:
     if np.all(np.isnan(errors)):
         return "n/a"
     j = int(np.nanargmax(errors))
-    return f"{math.degrees(float(errors[j])):.2f} ({joints[j]})"
+    worst = math.degrees(float(errors[j]))
+    return f"{worst:.2f} ({joints[j]})" if worst >= 0.005 else "0.00"  # none: no joint named
 
 
 def _share(v: float) -> str:
