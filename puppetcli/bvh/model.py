@@ -174,6 +174,9 @@ def quat_from_euler(angles: np.ndarray, order: str) -> np.ndarray:
     return q
 
 
+LOCKED = float(np.sqrt(np.finfo(float).eps))  # |cos b| below this: gimbal lock
+
+
 def euler_from_quat(q: np.ndarray, order: str) -> np.ndarray:
     """Intrinsic Tait–Bryan angles (n,3) in degrees of unit quaternions (n,4), in ``order``.
 
@@ -181,16 +184,19 @@ def euler_from_quat(q: np.ndarray, order: str) -> np.ndarray:
     −1 otherwise): sin b = s·R_ik, tan a = −s·R_jk / R_kk, tan c = −s·R_ij / R_ii, b from
     atan2 so it stays accurate near ±90°.  The first and third angles are in
     (−180°, 180°], the middle one in [−90°, 90°] (scipy's ``as_euler`` convention, which
-    tests/puppetcli/bvh/test_bvh_read.py checks this against).  At gimbal lock (|cos b| below
-    1e-12) only a ± c is defined: c is set to 0.  Written out rather than scipy's because
-    importing scipy.spatial costs a third of a second of every pose.
+    tests/puppetcli/bvh/test_bvh_read.py checks this against).  At gimbal lock only a ± c is
+    defined: c is set to 0.  "Locked" is |cos b| below √ε ≈ 1.5e-8: treating a nearly
+    locked rotation as locked errs by about cos b, computing a and c from entries of size
+    cos b errs by about ε / cos b, so the threshold √ε keeps both below ~1.5e-8 rad (with
+    1e-12, a rotation 1e-10 from lock came back 4e-6 rad off).  Written out rather than
+    scipy's because importing scipy.spatial costs a third of a second of every pose.
     """
     i, j, k = ("XYZ".index(axis) for axis in order.upper())
     s = 1.0 if (i, j, k) in ((0, 1, 2), (1, 2, 0), (2, 0, 1)) else -1.0
     r = quat.matrix(quat.normalize(np.asarray(q, dtype=float).reshape(-1, 4)))
     cos_b = np.hypot(r[:, i, i], r[:, i, j])
     b = np.arctan2(s * r[:, i, k], cos_b)
-    locked = cos_b < 1e-12
+    locked = cos_b < LOCKED
     a = np.where(
         locked,
         np.arctan2(s * r[:, k, j], r[:, j, j]),
