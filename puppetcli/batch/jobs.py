@@ -34,11 +34,14 @@ import re
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
+import click
 import yaml
 
+from puppetcli.bvh.model import ORDERS
+from puppetcli.commands.options import RATE, SCALE, STEP, VIEW
 from puppetcli.errors import PuppetError
 from puppetcli.feel.rigfile import plain_document
-from puppetcli.render.camera import parse_view
+from puppetcli.naming import deduplicated
 from puppetcli.run.pose import PoseOptions
 
 __all__ = ["BatchError", "Job", "apply_overrides", "jobs_from_scripts", "read_manifest",
@@ -63,45 +66,19 @@ class Job:
     error: str | None = None
 
 
-# option name → (PoseOptions field, reader of the manifest's value)
-def _bool(v: object) -> bool:
-    if isinstance(v, bool):
-        return v
-    if isinstance(v, str) and v.lower() in ("true", "false", "yes", "no", "1", "0"):
-        return v.lower() in ("true", "yes", "1")
-    raise ValueError(f"expected true or false, got {v!r}")
-
-
-def _positive(kind):
-    def read(v: object):
-        value = kind(v)
-        if not value > 0:
-            raise ValueError(f"expected a positive number, got {v!r}")
-        return value
-
-    return read
-
-
-def _choice(*choices: str):
-    def read(v: object) -> str:
-        if str(v).lower() not in choices:
-            raise ValueError(f"expected one of {', '.join(choices)}, got {v!r}")
-        return str(v).lower()
-
-    return read
-
-
+# option name → (PoseOptions field, the type pose's command line reads it with: the same
+# checks and ranges)
 OPTIONS = {
-    "trace_every": ("trace_every", _positive(int)),
-    "no_trace": ("no_trace", _bool),
-    "h": ("step", _positive(float)),
-    "no_render": ("no_render", _bool),
-    "order": ("order", lambda v: str(v).upper()),
-    "fps": ("fps", _positive(float)),
-    "interpolate": ("interpolate", lambda v: None if str(v) == "none" else _choice("slerp")(v)),
-    "scale": ("scale", _positive(float)),
-    "gltf": ("gltf", _bool),
-    "view": ("view", lambda v: parse_view(str(v))),
+    "trace_every": ("trace_every", click.IntRange(min=1)),
+    "no_trace": ("no_trace", click.BOOL),
+    "h": ("step", STEP),
+    "no_render": ("no_render", click.BOOL),
+    "order": ("order", click.Choice(ORDERS, case_sensitive=False)),
+    "fps": ("fps", RATE),
+    "interpolate": ("interpolate", click.Choice(["none", "slerp"])),
+    "scale": ("scale", SCALE),
+    "gltf": ("gltf", click.BOOL),
+    "view": ("view", VIEW),
 }
 
 
@@ -112,11 +89,13 @@ def read_options(given: dict, base: PoseOptions) -> PoseOptions:
     for name, value in given.items():
         if name not in OPTIONS:
             raise ValueError(f"options: expected one of {', '.join(OPTIONS)}, got {name!r}")
-        key, read = OPTIONS[name]
+        key, kind = OPTIONS[name]
         try:
-            changes[key] = read(value)
-        except (TypeError, ValueError, PuppetError) as exc:
-            raise ValueError(f"options.{name}: {exc}") from None
+            changes[key] = kind.convert(value, None, None)
+        except click.BadParameter as exc:
+            raise ValueError(f"options.{name}: {exc.message}") from None
+    if changes.get("interpolate") == "none":
+        changes["interpolate"] = None
     return replace(base, **changes)
 
 
@@ -211,13 +190,9 @@ def sweep(jobs: list[Job], grid: list[tuple[str, list[object]]]) -> list[Job]:
 
 def unique_ids(jobs: list[Job]) -> list[Job]:
     """Ids made safe as folder names and unique (a repeated one gets -2, -3, …)."""
-    seen: dict[str, int] = {}
-    out = []
-    for job in jobs:
-        base = re.sub(r"[^\w.~=+-]+", "_", job.id).lstrip(".") or "job"
-        seen[base] = seen.get(base, 0) + 1
-        out.append(replace(job, id=base if seen[base] == 1 else f"{base}-{seen[base]}"))
-    return out
+    safe = (re.sub(r"[^\w.~=+-]+", "_", job.id).lstrip(".") or "job" for job in jobs)
+    ids = deduplicated(safe, lambda k: f"-{k + 1}")
+    return [replace(job, id=i) for job, i in zip(jobs, ids, strict=True)]
 
 
 def _walk(doc: dict, path: str):

@@ -180,17 +180,18 @@ def _clean(root: Path) -> None:
 
 def run(
     jobs: list[Job], outdir: Path, executor: LocalPool | DaskPool | None = None,
-    retries: int = 2, progress: Callable[[dict], None] | None = None,
+    retries: int = 2, progress: Callable[[dict], None] | None = None, force: bool = False,
 ) -> list[dict]:  # fmt: skip
     """Run ``jobs`` into ``outdir`` (one folder each, and the summary): the summary's rows,
     in the jobs' order.  ``executor``: a LocalPool (default) or a DaskPool;
-    ``progress`` is called with each row as its job ends (or is found up to date).
+    ``progress`` is called with each row as its job ends (or is found up to date);
+    ``force`` runs every job, up to date or not.
     KeyboardInterrupt propagates once the summary is written."""
     root = Path(outdir).resolve()
     root.mkdir(parents=True, exist_ok=True)
     _clean(root)
     jobs = [_absolute(j) for j in unique_ids(jobs)]
-    rows, todo = _triage(jobs, root, progress)
+    rows, todo = _triage(jobs, root, progress, force)
     written = [time.monotonic()]
 
     def write() -> None:
@@ -213,15 +214,16 @@ def run(
     return [rows[j.id] for j in jobs]
 
 
-def _triage(jobs: list[Job], root: Path, progress) -> tuple[dict, deque]:
-    """Each job's row so far (bad input, up to date, or not run) and the jobs to run."""
+def _triage(jobs: list[Job], root: Path, progress, force: bool) -> tuple[dict, deque]:
+    """Each job's row so far (bad input, up to date, or not run) and the jobs to run (all
+    that can run, with ``force``)."""
     stamp = engine_stamp()
     rows = {j.id: _not_run(j) for j in jobs}
     todo: deque[tuple[Job, int]] = deque()
     for job in jobs:
         if job.error is not None:  # nothing to run: its row says why
             rows[job.id] = {**run_job(job, root), "fresh": True}
-        elif (kept := _up_to_date(job, root, stamp)) is not None:
+        elif not force and (kept := _up_to_date(job, root, stamp)) is not None:
             rows[job.id] = {**kept, "fresh": False}
         else:
             todo.append((job, 1))

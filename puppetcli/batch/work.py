@@ -10,6 +10,7 @@ rig or script with an error) writes nothing; its row says why.
 
 from __future__ import annotations
 
+import json
 import os
 import shutil
 import socket
@@ -65,9 +66,8 @@ def _row(job: Job, status: str, **facts) -> dict:
 
 
 def finished(root: Path, job: Job) -> dict | None:
-    """The row of ``job``'s finished output in ``root``, or None."""
-    import json
-
+    """What ``job.json`` of ``job``'s finished output in ``root`` holds (its row, input
+    hashes, options, overrides), or None."""
     path = root / job.id / JOB_FILE
     try:
         return json.loads(path.read_text(encoding="utf-8"))

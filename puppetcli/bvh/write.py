@@ -27,6 +27,7 @@ import numpy as np
 
 from puppetcli.bvh.model import ORDERS, euler_from_quat, unwrap_euler
 from puppetcli.errors import shown
+from puppetcli.naming import deduplicated
 from puppetcli.outputs import write_text_atomic
 from puppetcli.rig.skeleton import Skeleton
 from puppetcli.run.keyframes import BonePose, Keyframe
@@ -95,15 +96,8 @@ def bvh_text(
 def bvh_names(names: Sequence[str]) -> tuple[str, ...]:
     """Joint names BVH readers agree on: whitespace and braces become ``_``, then
     duplicates (and empty names) get a ``_2``, ``_3`` … suffix.  Other names are kept."""
-    out: list[str] = []
-    for name in names:
-        base = re.sub(r"[\s{}]+", "_", name) or "joint"
-        candidate, k = base, 1
-        while candidate in out:
-            k += 1
-            candidate = f"{base}_{k}"
-        out.append(candidate)
-    return tuple(out)
+    return deduplicated((re.sub(r"[\s{}]+", "_", n) or "joint" for n in names),
+                        lambda k: f"_{k + 1}")  # fmt: skip
 
 
 def _depth_first(parents: np.ndarray) -> list[int]:

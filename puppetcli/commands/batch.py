@@ -137,8 +137,6 @@ def command(
         found += read_manifest(p, base) if _is_manifest(p) else []
     found += jobs_from_scripts(scripts, rig, base) if scripts else []
     found = sweep(found, [_sweep(s) for s in sweeps])
-    if force:
-        _forget(outdir, found)
     pool = dask_pool(scheduler) if scheduler else LocalPool(workers)
     good = [j for j in found if j.error is None]
     if good and not scheduler and not compiled_ready():  # built once here, not per worker
@@ -147,7 +145,8 @@ def command(
     rows: list[dict] = []
     with progress_bar("jobs", len(found)) as tick:
         try:
-            rows = run(found, outdir, pool, retries, (lambda r: tick(1)) if tick else None)
+            rows = run(found, outdir, pool, retries, (lambda r: tick(1)) if tick else None,
+                       force=force)  # fmt: skip
         except KeyboardInterrupt:
             click.echo(f"interrupted: finished jobs are complete in {outdir}, "
                        f"see {outdir / 'summary.csv'}", err=True)  # fmt: skip
@@ -156,12 +155,3 @@ def command(
     emit(facts, [_table(rows), f"wrote {outdir / 'summary.csv'}"])
     if any(r["status"] != "ok" for r in rows):
         sys.exit(1)
-
-
-def _forget(outdir: Path, jobs: list) -> None:
-    """--force: drop the finished marks (job.json) so that every job runs again."""
-    from puppetcli.batch.jobs import unique_ids
-    from puppetcli.batch.work import JOB_FILE
-
-    for job in unique_ids(jobs):
-        (outdir / job.id / JOB_FILE).unlink(missing_ok=True)

@@ -35,7 +35,7 @@ import numpy as np
 from puppetcli.run.runner import Runner, TouchMode, script_model
 from puppetcli.script.actions import GRIP_DEFAULTS, Grip, Release
 from puppetcli.script.load import Script
-from puppetcli.spidar.pointer import Motion, min_jerk
+from puppetcli.spidar.pointer import Motion
 from solver import quat
 from solver.model import Model
 from solver.observe import bone_heads, bone_points, relative_rotations
@@ -76,28 +76,6 @@ class Hand:
     damping: float = 400.0  # N·s/m
     rot_stiffness: float = 500.0  # N·m/rad
     rot_damping: float = 20.0  # N·m·s/rad
-
-
-@dataclass(frozen=True)
-class Arc:
-    """A pointer motion turning by ``rotvec`` (world) about ``pivot`` over ``duration`` s
-    from (pos0, quat0) at t0, with the minimum-jerk profile."""
-
-    t0: float
-    duration: float
-    pivot: np.ndarray
-    pos0: np.ndarray
-    quat0: np.ndarray
-    rotvec: np.ndarray
-
-    def poses(self, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        s = min_jerk((times - self.t0) / self.duration)[:, None]
-        turn = quat.exp(s * self.rotvec)
-        return self.pivot + quat.rotate(turn, self.pos0 - self.pivot), quat.mul(turn, self.quat0)
-
-    def pose(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        pos, q = self.poses(np.array([t]))
-        return pos[0], q[0]
 
 
 @dataclass
@@ -161,6 +139,9 @@ class Operator:
         self.runner.pointer_on = True
         self.runner.act(TouchMode(on=False))
         self.chains = _chains(self.model)
+        along = self.model.bone_tail0 - self.model.bone_head0
+        along = along[self.model.joint_bone]
+        self.along = along / np.linalg.norm(along, axis=1)[:, None]  # (nj,3) bone axes at rest
         self.order = np.argsort([-len(c) for c in self.chains], kind="stable")
         self.grips = self.looks = self.over = 0
         self.path = self.turn = self.peak_torque = 0.0
@@ -172,16 +153,23 @@ class Operator:
     # --- what the operator sees ---------------------------------------------------------
 
     def relative(self) -> np.ndarray:
-        return relative_rotations(self.model, self.runner.sim.state.body_quat)
+        return relative_rotations(self.model, self.runner.sim.view().body_quat)
 
-    def sets(self) -> np.ndarray:
-        """Each joint's set: exp(−q_sf) ⊗ q_rel (nj,4)."""
-        state = self.runner.sim.state
-        return quat.mul(quat.exp(-state.joint_q_sf), self.relative())
+    def set_of(self, j: int) -> tuple[np.ndarray, np.ndarray]:
+        """(joint ``j``'s set exp(−q_sf) ⊗ q_rel, its rotation q_rel)."""
+        rel = self.relative()[j]
+        return quat.mul(quat.exp(-self.runner.sim.view().joint_q_sf[j]), rel), rel
+
+    def set_error(self, j: int, aim: np.ndarray) -> np.ndarray:
+        """What joint ``j``'s set lacks to be at ``aim`` (rotation vector, parent frame) and
+        the hand can correct."""
+        q_set, rel = self.set_of(j)
+        e = quat.log(quat.mul(aim, quat.conj(q_set)))
+        return self._free(e[None], rel[None], self.along[j][None])[0]
 
     def _look(self) -> None:
         """Record the pose's largest error now; the first time it is within 2°: reached."""
-        state = self.runner.sim.state
+        state = self.runner.sim.view()
         worst = float(joint_errors(self.model, state.body_quat, self.target).max())
         self.trace.append((state.time - self.t_key, worst))
         if worst <= REACHED and math.isnan(self.reached):
@@ -222,7 +210,7 @@ class Operator:
 
     def _grip(self, b: int) -> None:
         local = self._grip_point(b)
-        state = self.runner.sim.state
+        state = self.runner.sim.view()
         world = bone_points(self.model, state, (self.model.bone_head0[b] + local)[None],
                             bones=np.array([b]))[0]  # fmt: skip
         self._reach(world)
@@ -239,7 +227,7 @@ class Operator:
         """Turn the gripped bone of joint ``j`` about the joint so that its rotation
         becomes ``goal`` (parent frame)."""
         b, p = int(self.model.joint_bone[j]), int(self.model.joint_parent[j])
-        state = self.runner.sim.state
+        state = self.runner.sim.view()
         q_parent = state.body_quat[p] if p < self.model.nbody else quat.IDENTITY
         change = quat.log(quat.mul(goal, quat.conj(self.relative()[j])))
         rotvec = quat.rotate(q_parent, change)
@@ -247,7 +235,7 @@ class Operator:
         pos, q = self.runner.motion.pose(state.time)
         angle = float(np.linalg.norm(rotvec))
         duration = max(SHORTEST, angle / self._speed(j, change / max(angle, 1e-12)))
-        self.runner.motion = Arc(state.time, duration, pivot, pos, q, rotvec)
+        self.runner.motion = Motion(state.time, duration, pos, q, np.zeros(3), rotvec, pivot)
         self.path += angle * float(np.linalg.norm(pos - pivot))
         self.turn += angle
         self._advance(duration)
@@ -273,22 +261,28 @@ class Operator:
         while waited < HOLD:
             self._advance(TICK)
             waited += TICK
-            state = self.runner.sim.state
+            state = self.runner.sim.view()
             spin = float(np.linalg.norm(state.body_vel[b, 3:]))
             if not state.joint_yielded[j] and spin < STILL:
                 return
 
     # --- planning -----------------------------------------------------------------------
 
-    def _free(self, j: int, e: np.ndarray) -> np.ndarray:
-        """The part of a set error ``e`` (parent frame) the hand can correct: all of it at
-        6 DOF, its swing (across the bone) at 3."""
+    def _free(self, e: np.ndarray, rel: np.ndarray, along: np.ndarray) -> np.ndarray:
+        """The part of errors ``e`` (k,3, parent frames) of joints at rotations ``rel`` (k,4)
+        with rest bone axes ``along`` (k,3) the hand can correct: all of it at 6 DOF, the
+        swing (across the bone) at 3."""
         if self.hand.dof == 6:
             return e
-        b = int(self.model.joint_bone[j])
-        along = self.model.bone_tail0[b] - self.model.bone_head0[b]
-        axis = quat.rotate(self.relative()[j], along / np.linalg.norm(along))
-        return e - (e @ axis) * axis
+        axis = quat.rotate(rel, along)
+        return e - np.sum(e * axis, axis=1)[:, None] * axis
+
+    def _split(self, target: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Per joint, the error (rad) to ``target`` the hand can correct and the rest."""
+        rel = self.relative()
+        e = quat.log(quat.mul(target, quat.conj(rel)))
+        free = self._free(e, rel, self.along)
+        return np.linalg.norm(free, axis=1), np.linalg.norm(e - free, axis=1)
 
     def _give(self, j: int, u: np.ndarray) -> float:
         """How far (rad) past its aim a joint must be turned along ``u`` for its set to end
@@ -316,7 +310,7 @@ class Operator:
         gives: dict[bool, float] = {}  # learnt, per side of the first turn
         first = None
         for _ in range(ATTEMPTS):
-            e = self._free(j, quat.log(quat.mul(aim, quat.conj(self.sets()[j]))))
+            e = self.set_error(j, aim)
             size = float(np.linalg.norm(e))
             if size < SET_TOLERANCE or size > before + PROGRESS:
                 break  # placed, or going the wrong way: let go and look again
@@ -330,15 +324,15 @@ class Operator:
                 push = push + GAIN * e
             else:  # past the aim by what it gives back this way (learnt, else the model's)
                 push = u * gives.get(side, self._give(j, u))
-            was = self.sets()[j]
+            was = self.set_of(j)[0]
             self._turn(j, quat.mul(quat.exp(push), aim))
             self._hold(j)
-            after = self._free(j, quat.log(quat.mul(aim, quat.conj(self.sets()[j]))))
-            moved = float(np.linalg.norm(quat.log(quat.mul(self.sets()[j], quat.conj(was)))))
+            after = self.set_error(j, aim)
+            moved = float(np.linalg.norm(quat.log(quat.mul(self.set_of(j)[0], quat.conj(was)))))
             if moved > LEARN * size:  # it flowed: what it gives back this way
                 gives[side] = max(0.0, float((push + after) @ u))
             before = size
-        kept = self.sets()[j]
+        kept = self.set_of(j)[0]
         if gripped:
             self.runner.act(Release(line=0))
         return kept
@@ -354,7 +348,7 @@ class Operator:
         aim = target.copy()
         self._look()
         stuck: set[int] = set()  # joints a pass did not bring closer: left alone
-        err = self._errors_to(target)
+        err = self._split(target)[0]
         for _ in range(PASSES):
             todo = [int(j) for j in self.order if err[j] > FIX and int(j) not in stuck]
             if not todo:
@@ -366,34 +360,22 @@ class Operator:
             shift = quat.mul(self.relative(), quat.conj(placed))  # since let go: sag, creep
             for j in todo:
                 aim[j] = quat.mul(quat.conj(shift[j]), target[j])
-            now = self._errors_to(target)
+            now = self._split(target)[0]
             stuck |= {j for j in todo if now[j] > err[j] - PROGRESS}
             err = now
-        held = joint_errors(self.model, self.runner.sim.state.body_quat, target)
+        held = joint_errors(self.model, self.runner.sim.view().body_quat, target)
         duration = self.runner.sim.time - self.t_key
         self._advance(RETAIN)
-        final = joint_errors(self.model, self.runner.sim.state.body_quat, target)
+        final = joint_errors(self.model, self.runner.sim.view().body_quat, target)
         wanted = quat.log(quat.mul(target, quat.conj(start)))
         got = quat.log(quat.mul(self.relative(), quat.conj(start)))
         size = float(np.sum(wanted * wanted))
         kept = float(np.sum(wanted * got)) / size if size > 0.0 else math.nan
+        unreachable = self._split(target)[1] if self.hand.dof == 3 else np.full(len(final), np.nan)
         beyond = self.over / self.looks if math.isfinite(sum(self.hand.capacity)) else math.nan
         return KeyResult(label, self.reached, self.grips, self.path, self.turn, self.runner.peak,
                          self.peak_torque, held, final, kept, duration, beyond,
-                         self.relative(), self._unreachable(target), self.trace)  # fmt: skip
-
-    def _unreachable(self, target: np.ndarray) -> np.ndarray:
-        """Per joint, the error (rad) left that the hand cannot correct (NaN at 6 DOF)."""
-        if self.hand.dof == 6:
-            return np.full(self.model.njoint, math.nan)
-        e = quat.log(quat.mul(target, quat.conj(self.relative())))
-        return np.array([np.linalg.norm(e[j] - self._free(j, e[j]))
-                         for j in range(self.model.njoint)])  # fmt: skip
-
-    def _errors_to(self, target: np.ndarray) -> np.ndarray:
-        """Errors (rad) the hand can correct: all at 6 DOF, the swing part at 3."""
-        e = quat.log(quat.mul(target, quat.conj(self.relative())))
-        return np.array([np.linalg.norm(self._free(j, e[j])) for j in range(self.model.njoint)])
+                         self.relative(), unreachable, self.trace)  # fmt: skip
 
 
 def run_task(model: Model, keys: list[tuple[str, np.ndarray]], hand: Hand) -> list[KeyResult]:

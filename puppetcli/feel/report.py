@@ -10,7 +10,7 @@ from collections.abc import Sequence
 
 from puppetcli.feel.measure import AxisFeel, JointFeel
 
-__all__ = ["COLUMNS", "aligned", "feel_csv", "feel_json", "feel_table"]
+__all__ = ["COLUMNS", "aligned", "feel_csv", "feel_json", "feel_table", "json_number"]
 
 # (key, heading, unit, format, has a prediction)
 COLUMNS = (
@@ -83,7 +83,8 @@ def _csv_value(v) -> str:
     return str(v)
 
 
-def _number(v: float) -> float | None:
+def json_number(v: float) -> float | None:
+    """``v``, or None (JSON's null) where it is not finite."""
     return v if math.isfinite(v) else None
 
 
@@ -92,15 +93,15 @@ def feel_json(joints: Sequence[JointFeel]) -> list[dict]:
     return [
         {
             "joint": j.joint,
-            "yield_torque": _number(j.yield_torque),
+            "yield_torque": json_number(j.yield_torque),
             "hold_rest": j.hold_rest,
             "gravity_yields": j.gravity_yields,
             "axes": [
                 {
                     "axis": a.axis,
                     "vector": [float(v) for v in a.vector],
-                    "measured": {k: _number(float(getattr(a, k))) for k, *_ in COLUMNS},
-                    "isolated": {k: _number(v) for k, v in a.isolated.items()},
+                    "measured": {k: json_number(float(getattr(a, k))) for k, *_ in COLUMNS},
+                    "isolated": {k: json_number(v) for k, v in a.isolated.items()},
                 }
                 for a in j.axes
             ],

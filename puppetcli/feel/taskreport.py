@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from puppetcli.feel.operator import KeyResult
-from puppetcli.feel.report import aligned
+from puppetcli.feel.report import aligned, json_number
 
 __all__ = ["TaskRun", "task_csv", "task_json", "task_table"]
 
@@ -76,12 +76,11 @@ def task_table(runs: Sequence[TaskRun]) -> str:
 
 
 def _key_json(k: KeyResult, joints: Sequence[str]) -> dict:
-    number = lambda v: None if math.isnan(v) else float(v)  # noqa: E731
     return {
-        "label": k.label, "reached_s": number(k.reached), "duration_s": k.duration,
+        "label": k.label, "reached_s": json_number(k.reached), "duration_s": k.duration,
         "grips": k.grips, "path_m": k.path, "turn_deg": math.degrees(k.turn),
         "peak_force_n": k.peak_force, "peak_torque_nm": k.peak_torque,
-        "kept": k.kept, "beyond_device": number(k.beyond),
+        "kept": json_number(k.kept), "beyond_device": json_number(k.beyond),
         "error_let_go_deg": dict(zip(joints, np.degrees(k.held).tolist(), strict=True)),
         "error_final_deg": dict(zip(joints, np.degrees(k.final).tolist(), strict=True)),
         "out_of_reach_deg": None if np.all(np.isnan(k.unreachable)) else

@@ -35,6 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from puppetcli.errors import PuppetError
+from puppetcli.naming import deduplicated
 from puppetcli.outputs import make_parent, write_text_atomic
 from puppetcli.rig.load import MAX_BONES, rig_from_text
 from solver.model import Model, build_model
@@ -121,14 +122,7 @@ def rig_text(
 
 def unique_names(names: tuple[str, ...]) -> tuple[str, ...]:
     """Names as in the file; a repeated name gets ``.001``, ``.002`` … (as Blender does)."""
-    out: list[str] = []
-    for name in names:
-        candidate, k = name, 0
-        while candidate in out:
-            k += 1
-            candidate = f"{name}.{k:03d}"
-        out.append(candidate)
-    return tuple(out)
+    return deduplicated(names, lambda k: f".{k:03d}")
 
 
 def _joint_factors(

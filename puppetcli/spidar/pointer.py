@@ -3,7 +3,8 @@
 A move from p0 to p1 over T follows p(t) = p0 + (p1 − p0)·s(t/T) with the
 minimum-jerk profile s(τ) = 10τ³ − 15τ⁴ + 6τ⁵ (zero velocity and acceleration at
 both ends).  A rotation by angle θ about a world axis n through the pointer
-follows q(t) = exp(n·θ·s(t/T)) ⊗ q0.  The velocity handed to the solver for a
+follows q(t) = exp(n·θ·s(t/T)) ⊗ q0; about a pivot c instead (an arc), the position
+turns with it: p(t) = c + exp(n·θ·s(t/T))·(p0 − c).  The velocity handed to the solver for a
 step is the exact mean over that step: (pose_end − pose_start)/h.
 
 Workspace mapping (device → world): world = offset + scale · device.
@@ -28,7 +29,9 @@ def min_jerk(tau):
 
 @dataclass(frozen=True)
 class Motion:
-    """A pointer motion from (pos0, quat0) starting at t0 over ``duration``."""
+    """A pointer motion from (pos0, quat0) starting at t0 over ``duration``: a move by
+    ``delta`` and a turn by ``rotvec`` about the pointer, or, with ``pivot``, about that
+    world point (an arc: the position turns about the pivot too)."""
 
     t0: float
     duration: float
@@ -36,6 +39,7 @@ class Motion:
     quat0: np.ndarray
     delta: np.ndarray  # (3,) displacement
     rotvec: np.ndarray  # (3,) world rotation vector
+    pivot: np.ndarray | None = None  # (3,) world point the turn is about; None: the pointer
 
     def pose(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         """(position, quaternion) at time t."""
@@ -49,7 +53,10 @@ class Motion:
         else:
             s = np.ones(len(times))
         s = s[:, None]
-        return self.pos0 + s * self.delta, quat.mul(quat.exp(s * self.rotvec), self.quat0)
+        turn = quat.exp(s * self.rotvec)
+        pos = self.pos0 if self.pivot is None else (
+            self.pivot + quat.rotate(turn, self.pos0 - self.pivot))  # fmt: skip
+        return pos + s * self.delta, quat.mul(turn, self.quat0)
 
 
 def still(pos: np.ndarray, q: np.ndarray) -> Motion:

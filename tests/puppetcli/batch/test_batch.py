@@ -250,3 +250,11 @@ def test_a_manifest_without_jobs_is_refused(tmp_path):
     out = CliRunner().invoke(cli, ["batch", str(manifest), "-o", str(tmp_path / "o")])
     assert out.exit_code == 1
     assert out.output.strip() == f"error: {manifest}: expected a mapping with a 'jobs' list"
+
+
+def test_job_ids_are_unique_even_against_ids_that_look_numbered():
+    from puppetcli.batch.jobs import Job, unique_ids
+
+    jobs = [Job(i, DOLL, SCRIPTS[0]) for i in ("a", "a-2", "a", "b c", ".x")]
+    # the rule: a taken id gets -2, -3, … until free; unsafe characters become _
+    assert [j.id for j in unique_ids(jobs)] == ["a", "a-2", "a-3", "b_c", "x"]
