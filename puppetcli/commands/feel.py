@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from pathlib import Path
 
 import click
@@ -99,9 +100,7 @@ def command(
     letting go.  See docs/feel.md.
     """
     if tasks:
-        for path in (csv_path, *(plot_dir / f"{t.stem}.png" for t in tasks if plot_dir)):
-            if path is not None:
-                refuse_overwrite(path, force)
+        _refuse(force, csv_path, *(plot_dir / f"{t.stem}.png" for t in tasks if plot_dir))
         run_tasks(rig, compare, tasks, dofs, device, engine, (csv_path, plot_dir))
         return
     for name, value in (("--dof", dofs), ("--device", device), ("--compare", compare)):
@@ -110,9 +109,7 @@ def command(
     spec = load_rig(rig)
     model = build_model(spec)
     wanted = joint_indices(model.joint_names, joints)
-    for out in (csv_path, plot_dir / "overview.png" if plot_dir else None):
-        if out is not None:
-            refuse_overwrite(out, force)
+    _refuse(force, csv_path, plot_dir / "overview.png" if plot_dir else None)
     model, _ = prepare_engine(model, engine, rig)
     hold = rest_run(model)
     found = []
@@ -121,14 +118,10 @@ def command(
             found.append(measure_joint(model, j, math.radians(angle), duration, hold))
             if tick:
                 tick(1)
-    written = []
-    if csv_path is not None:
-        make_parent(csv_path)
-        write_text_atomic(csv_path, feel_csv(found))
-        written.append(str(csv_path))
-    if plot_dir is not None:
-        pictures = {j.joint: joint_png(j) for j in found} | {"overview": overview_png(found)}
-        written += write_plots(plot_dir, pictures)
+    written = _write(
+        csv_path, lambda: feel_csv(found), plot_dir,
+        lambda: {j.joint: joint_png(j) for j in found} | {"overview": overview_png(found)},
+    )  # fmt: skip
     facts = {"rig": str(rig), "angle": angle, "time": duration, "joints": feel_json(found),
              "written": written}  # fmt: skip
     lines = [feel_table(found)] + [f"wrote {w}" for w in written]
@@ -161,16 +154,11 @@ def run_tasks(
                     runs.append(TaskRun(f"{label(path)} {dof}-DOF", task.stem, names[0], found))
                     if tick:
                         tick(1)
-    written = []
     csv_path, plot_dir = out
-    if csv_path is not None:
-        make_parent(csv_path)
-        write_text_atomic(csv_path, task_csv(runs))
-        written.append(str(csv_path))
-    if plot_dir is not None:
-        pictures = {t.stem: task_png(t.stem, [r for r in runs if r.task == t.stem])
-                    for t, _ in work}  # fmt: skip
-        written += write_plots(plot_dir, pictures)
+    written = _write(
+        csv_path, lambda: task_csv(runs), plot_dir,
+        lambda: {t.stem: task_png(t.stem, [r for r in runs if r.task == t.stem]) for t, _ in work},
+    )  # fmt: skip
     facts = {"rigs": [str(r) for r in rigs], "device": device,
              "capacity": [None if math.isinf(c) else c for c in cap],
              "tasks": task_json(runs), "written": written}  # fmt: skip
@@ -179,3 +167,25 @@ def run_tasks(
         lines.append(f"{device} displays at most {cap[0]:.1f} N and {cap[1]:.2f} N·m "
                      "in every direction")  # fmt: skip
     emit(facts, lines + [f"wrote {w}" for w in written])
+
+
+def _refuse(force: bool, *paths: Path | None) -> None:
+    """Stop before any work if an output exists (unless --force)."""
+    for path in paths:
+        if path is not None:
+            refuse_overwrite(path, force)
+
+
+def _write(
+    csv_path: Path | None, csv_text: Callable[[], str], plot_dir: Path | None,
+    pictures: Callable[[], dict],
+) -> list[str]:  # fmt: skip
+    """The CSV (when asked) and the plots (when asked), made only then: the paths written."""
+    written = []
+    if csv_path is not None:
+        make_parent(csv_path)
+        write_text_atomic(csv_path, csv_text())
+        written.append(str(csv_path))
+    if plot_dir is not None:
+        written += write_plots(plot_dir, pictures())
+    return written
