@@ -102,12 +102,16 @@ def run_job(job: Job, root: Path, attempt: int = 1) -> dict:
     planned.model = planned.model.with_options(engine="compiled")
     stage = root / f".{job.id}.partial-{os.getpid()}"
     shutil.rmtree(stage, ignore_errors=True)
-    stage.mkdir(parents=True)
-    result = run_pose(planned, stage, job.options)
-    if isinstance(result.error, Interrupted):  # Ctrl-C: nothing of it is kept
+    try:
+        stage.mkdir(parents=True)
+        result = run_pose(planned, stage, job.options)
+        if isinstance(result.error, Interrupted):  # Ctrl-C: nothing of it is kept
+            shutil.rmtree(stage, ignore_errors=True)
+            return _row(job, "interrupted", error=one_line(str(result.error)), **where)
+        write_pose(stage, planned, result, job.options)
+    except (PuppetError, OSError) as exc:  # the job's outputs could not be written
         shutil.rmtree(stage, ignore_errors=True)
-        return _row(job, "interrupted", error=one_line(str(result.error)), **where)
-    write_pose(stage, planned, result, job.options)
+        return _row(job, "output error", error=one_line(str(exc)), **where)
     failed = [r.message for r in result.expectations if not r.passed]
     status = "ok"
     if isinstance(result.error, SimulationError):

@@ -258,3 +258,17 @@ def test_job_ids_are_unique_even_against_ids_that_look_numbered():
     jobs = [Job(i, DOLL, SCRIPTS[0]) for i in ("a", "a-2", "a", "b c", ".x")]
     # the rule: a taken id gets -2, -3, … until free; unsafe characters become _
     assert [j.id for j in unique_ids(jobs)] == ["a", "a-2", "a-3", "b_c", "x"]
+
+
+def test_a_job_whose_outputs_cannot_be_written_is_its_own_error(tmp_path, monkeypatch):
+    from puppetcli.batch import work
+    from puppetcli.outputs import OutputError
+
+    def full(*args, **kwargs):
+        raise OutputError("keyframes.json: No space left on device")
+
+    monkeypatch.setattr(work, "write_pose", full)
+    (job,) = jobs_from_scripts([SCRIPTS[0]], DOLL, QUICK)
+    row = work.run_job(job, tmp_path)  # in this process: the patch applies
+    assert row["status"] == "output error" and "No space left" in row["error"]
+    assert list(tmp_path.iterdir()) == []  # nothing half-written left behind
