@@ -22,7 +22,9 @@ Limit rows (one-sided, only while within ``limit_margin`` of a limit).  With d
 the bone axis at rest and d' = q_rel d:
   swing  θ = acos(d·d'),  C = swing − θ ≥ 0,  dθ/dt = n·ω_rel, n = d × d'/|d × d'|;
   twist  φ = 2·atan2(q_rel.xyz·d, q_rel.w),  C = φ − lo ≥ 0 and hi − φ ≥ 0,
-         dφ/dt ≈ (R_p d')·ω_rel.
+         dφ/dt = R_p (d + d')/(1 + d·d') · ω_rel  (q_rel = swing ⊗ twist, the twist about
+         d; exact at any swing, tests/solver/test_jacobians.py; the denominator is kept
+         above TWIST_FLOOR, a swing within 2.6° of π, where the twist is undefined).
 A row with C > 0 is speculative: bias C/h lets the joint reach the limit in one
 step but not pass it; a violated row pulls back with erp·C/h.
 """
@@ -154,6 +156,10 @@ def rheology_rows(model: Model, state: State, fr: JointFrames, h: float) -> tupl
     return rows, np.repeat(j, 3)
 
 
+TWIST_FLOOR = 1e-3
+"""Least 1 + d·d' in the twist rows' axis (d + d')/(1 + d·d'): a swing within 2.6° of π."""
+
+
 def _limit_candidates(model: Model, fr: JointFrames) -> tuple[list, list, list, list]:
     """(joint, slot, world axis, C) for every limit within its margin."""
     d = model.joint_axis
@@ -163,7 +169,8 @@ def _limit_candidates(model: Model, fr: JointFrames) -> tuple[list, list, list, 
     q = np.where(fr.q_rel[:, :1] < 0.0, -fr.q_rel, fr.q_rel)
     twist = 2.0 * np.arctan2(np.einsum("ni,ni->n", q[:, 1:], d), q[:, 0])
     twist = (twist + np.pi) % (2.0 * np.pi) - np.pi
-    twist_axis = np.einsum("nij,nj->ni", fr.rot_parent, d_now)
+    rate = (d + d_now) / np.maximum(1.0 + cos_s, TWIST_FLOOR)[:, None]
+    twist_axis = np.einsum("nij,nj->ni", fr.rot_parent, rate)
     margin = model.options.limit_margin
     out = ([], [], [], [])
     for j in np.flatnonzero(swing_c < margin):

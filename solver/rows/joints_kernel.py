@@ -29,6 +29,7 @@ from solver.kin_kernel import (
     sub,
     vec,
 )
+from solver.rows.joints import TWIST_FLOOR
 from solver.rows.table import KIND_JOINT, KIND_LIMIT, KIND_RHEOLOGY
 from solver.rows.table_kernel import AXES, INF, ZERO, angular_jac, null_rows, point_jac, set_row
 
@@ -172,7 +173,8 @@ def limit_rows(limits, quat, rot, h, erp, margin, asleep, rw, n, gaps, turned):
     """One-sided rows (λ ≥ 0) for limits within ``margin``: swing rows of every joint,
     then twist-low, then twist-high; bias C/h when C ≥ 0 (speculative) else erp·C/h.
     swing θ = acos(d·d'), C = swing − θ, axis −R_p (d × d')/|d × d'|;
-    twist φ = 2 atan2(q.xyz·d, q.w) wrapped to [−π, π), C = φ − lo or hi − φ, axis ±R_p d'.
+    twist φ = 2 atan2(q.xyz·d, q.w) wrapped to [−π, π), C = φ − lo or hi − φ, axis
+    ±R_p (d + d')/max(1 + d·d', TWIST_FLOOR).
     Joints of sleeping bodies (asleep) have none.  Each joint's C and d' are computed
     once (``limit_gaps``, into the scratch arrays gaps and turned (nj, 3)), the rows
     then made in their order."""
@@ -191,7 +193,8 @@ def limit_rows(limits, quat, rot, h, erp, margin, asleep, rw, n, gaps, turned):
                 nv = _div(nv, length) if length > 1e-9 else _perpendicular(d)
                 world = neg(matvec(rot, p, nv) if p >= 0 else nv)
             else:
-                world = matvec(rot, p, d_now) if p >= 0 else d_now
+                rate = scale(1.0 / max(1.0 + dot(d, d_now), TWIST_FLOOR), add(d, d_now))
+                world = matvec(rot, p, rate) if p >= 0 else rate
                 world = world if slot == 1 else neg(world)
             ja, jb = angular_jac(world)
             bias = (c if c >= 0.0 else erp * c) / h
