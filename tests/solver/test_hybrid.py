@@ -43,7 +43,7 @@ def test_hybrid_reaches_the_reference_without_friction(seed):
     vel_ref = velocities(rows, resp, vel_free, reference_solve(q, c, rows.lo, rows.hi,
                                                                rows.fric_of, rows.mu))  # fmt: skip
     lam, _, _ = hybrid_solve(rows, resp, vel_free, np.zeros(len(rows)), 2000)
-    assert np.abs(velocities(rows, resp, vel_free, lam) - vel_ref).max() < 1e-7
+    assert np.abs(velocities(rows, resp, vel_free, lam) - vel_ref).max() < 1e-8  # ≤ 2.0e-9
 
 
 @pytest.mark.parametrize("seed", range(8))
@@ -51,9 +51,10 @@ def test_hybrid_with_friction_solves_the_lcp(seed):
     model, state = contact_scene(seed)
     rows, resp, vel_free, _ = problem(model, state)
     q, c = dense_system(rows, resp, vel_free)
-    lam, _, residual = hybrid_solve(rows, resp, vel_free, np.zeros(len(rows)), 5000)
-    assert lcp_violation(q, c, lam, rows) < 1e-9
-    assert residual < 1e-9
+    # 20,000 sweeps: seed 2's bounded rows are nearly redundant and converge slowly
+    lam, _, residual = hybrid_solve(rows, resp, vel_free, np.zeros(len(rows)), 20_000)
+    assert lcp_violation(q, c, lam, rows) < 5e-12  # measured ≤ 1.0e-12 over the 8 seeds
+    assert residual < 5e-12
 
 
 @pytest.mark.parametrize("sweeps", [1, 3, 15])
@@ -66,9 +67,9 @@ def test_joint_rows_hold_exactly_whatever_the_sweeps(sweeps):
     eq = equality_rows(rows)
     lam, _, _ = hybrid_solve(rows, resp, vel_free, np.zeros(len(rows)), sweeps)
     scale = np.abs(c[eq]).max()
-    assert np.abs(q[eq] @ lam + c[eq]).max() < 1e-9 * scale
+    assert np.abs(q[eq] @ lam + c[eq]).max() < 1e-14 * scale  # measured ≤ 1.9e-15
     lam_pgs = run_pgs(rows, resp, vel_free, sweeps)[0]
-    assert np.abs(q[eq] @ lam_pgs + c[eq]).max() > 1e-4 * scale
+    assert np.abs(q[eq] @ lam_pgs + c[eq]).max() > 2.5e-3 * scale  # measured ≥ 0.0136
 
 
 def test_without_joints_the_hybrid_is_pgs_on_the_dense_system():
@@ -86,7 +87,7 @@ def test_without_joints_the_hybrid_is_pgs_on_the_dense_system():
         lam_dense = dense_pgs(q, c, rows.lo, rows.hi, rows.fric_of, rows.mu,
                               np.zeros(len(rows)), sweeps, 0.0)[0]  # fmt: skip
         lam_pgs = run_pgs(rows, resp, vel_free, sweeps)[0]
-        assert np.abs(lam_dense - lam_pgs).max() <= 1e-10 * max(1.0, np.abs(lam_pgs).max())
+        assert np.abs(lam_dense - lam_pgs).max() <= 1e-15 * max(1.0, np.abs(lam_pgs).max())
 
 
 def test_auto_uses_hybrid_with_contacts_and_direct_without():
@@ -120,8 +121,9 @@ def test_a_dormant_contact_wakes_when_the_body_would_cross_it():
     lam, _, _ = hybrid_solve(rows, resp, vel_free, lam0, 200)
     assert lam[0] > 0.0
     vel = velocities(rows, resp, vel_free, lam)
-    assert np.abs(vel - velocities(rows, resp, vel_free, lam_ref)).max() < 1e-9
-    assert vel[0, 1] == pytest.approx(-gap / model.options.h, rel=1e-5)
+    assert np.abs(vel - velocities(rows, resp, vel_free, lam_ref)).max() < 5.5e-11  # 1.1e-11
+    # measured 1.05e-6: the 1e-6 regularisation
+    assert vel[0, 1] == pytest.approx(-gap / model.options.h, rel=5e-6)
 
 
 @pytest.mark.parametrize("limit", [0.05, 0.3, 1e6])
@@ -145,6 +147,6 @@ def test_grip_at_its_force_limit_with_contacts_equals_the_reference(limit):
     lam_ref = reference_solve(q, c, rows.lo, rows.hi, rows.fric_of, rows.mu)
     lam, _, _ = hybrid_solve(rows, resp, vel_free, np.zeros(len(rows)), 3000)
     vel, vel_ref = (velocities(rows, resp, vel_free, x) for x in (lam, lam_ref))
-    assert np.abs(vel - vel_ref).max() < 1e-7
+    assert np.abs(vel - vel_ref).max() < 4e-8  # measured ≤ 7.6e-9
     grip = rows.kind == KIND_GRIP
     assert np.isclose(np.abs(lam[grip]), limit).any() == (limit < 100.0)

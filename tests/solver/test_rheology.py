@@ -8,21 +8,21 @@ import scipy.linalg
 from paper_experiment import DD, DF, INERTIA, KF, T_END, T_LOAD, TAU, recursion
 from rigbuild import one_bone
 
+from solver.engine import Engine
 from solver.model import build_model
 from solver.observe import joint_rotations
-from solver.pipeline import step
 from solver.state import StepInput, initial_state
 
 
-def simulate(h: float) -> np.ndarray:
+def simulate(h: float, engine: str = "numpy") -> np.ndarray:
     """Joint angle about z after every step, through the solver."""
-    model = build_model(one_bone(h, KF, DF, DD, INERTIA))
-    state = initial_state(model)
+    model = build_model(one_bone(h, KF, DF, DD, INERTIA)).with_options(engine=engine)
+    stepper = Engine(model).stepper(initial_state(model))
     loaded = StepInput(body_torque=np.array([[0.0, 0.0, TAU]]))
     angles = []
     for k in range(round(T_END / h)):
-        state, _ = step(model, state, loaded if k < round(T_LOAD / h) else None)
-        angles.append(joint_rotations(model, state)[0, 2])
+        stepper.advance(loaded if k < round(T_LOAD / h) else None)
+        angles.append(joint_rotations(model, stepper.view())[0, 2])
     return np.array(angles)
 
 
@@ -56,20 +56,24 @@ def continuous(times: np.ndarray) -> np.ndarray:
     )
 
 
+@pytest.mark.parametrize("engine", ["numpy", "compiled"])
 @pytest.mark.parametrize("h", [0.02, 0.005])
-def test_solver_equals_exact_discrete_recursion(h):
-    assert np.max(np.abs(simulate(h) - recursion(h))) < 1e-9
+def test_solver_equals_exact_discrete_recursion(h, engine):
+    # Measured 6.1e-16 rad (h = 20 ms) and 4.0e-15 rad (5 ms) on both engines; 1e-12 leaves
+    # rounding headroom over 1200 steps (any modelling error is ≥ 1e-6).
+    assert np.max(np.abs(simulate(h, engine) - recursion(h))) < 1e-12
 
 
 def test_first_order_convergence_to_continuous_solution():
     errors = []
-    for h in (0.02, 0.01, 0.005, 0.0025):
-        angles = simulate(h)
+    for h in (0.02, 0.01, 0.005, 0.0025):  # the compiled step: it is the recursion (above)
+        angles = simulate(h, "compiled")
         times = h * np.arange(1, len(angles) + 1)
         errors.append(np.max(np.abs(angles - continuous(times))))
     ratios = np.array(errors[:-1]) / np.array(errors[1:])
-    # Semi-implicit Euler is first order: the ratio tends to 2 from below as h → 0.
-    assert np.all((ratios > 1.7) & (ratios < 2.1)), (errors, ratios)
+    # Semi-implicit Euler is first order: the ratio tends to 2 from below as h → 0
+    # (measured 1.737, 1.820, 1.880).
+    assert np.all((ratios > 1.7) & (ratios < 2.0)), (errors, ratios)
     assert np.all(np.diff(ratios) > 0.0) and ratios[-1] > 1.85, ratios
 
 
@@ -79,7 +83,7 @@ def test_unloading_recovers_partly_and_keeps_a_residual():
     at_unload = angles[round(T_LOAD / h) - 1]
     final = angles[-1]
     permanent = TAU * T_LOAD / DD  # continuous permanent set τ·t1/D_d
-    assert final < 0.8 * at_unload  # it came back...
+    assert final < 0.8 * at_unload  # it came back (measured to 0.707 of it)...
     assert final > permanent  # ...but not all the way (the Voigt part is still recovering)
     # After a very long time only the dashpot's share remains: continuous model limit.
-    assert abs(continuous(np.array([400.0]))[0] - permanent) < 1e-6
+    assert abs(continuous(np.array([400.0]))[0] - permanent) < 1e-14  # measured 2.1e-15

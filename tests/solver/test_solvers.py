@@ -105,8 +105,9 @@ def test_pgs_approaches_the_reference_as_iterations_grow(seed):
     errors = [
         np.abs(run_pgs(rows, resp, vel_free, n)[1] - vel_ref).max() for n in (3, 30, 300, 30000)
     ]
-    assert errors[0] > 1e-3, errors  # not trivial for PGS
-    assert errors[-1] < 1e-7 and errors[-1] < errors[1] < errors[0], errors
+    assert errors[0] > 0.04, errors  # not trivial for PGS (measured ≥ 0.2 m/s)
+    # measured ≤ 2.0e-9 m/s after 30,000 sweeps
+    assert errors[-1] < 1e-8 and errors[-1] < errors[1] < errors[0], errors
 
 
 @pytest.mark.parametrize("seed", range(8))
@@ -120,19 +121,24 @@ def test_pgs_with_friction_converges_to_the_solution_of_the_lcp(seed):
     model, state = contact_scene(seed)
     rows, resp, vel_free, _ = problem(model, state)
     q, c = dense_system(rows, resp, vel_free)
-    violation = [lcp_violation(q, c, run_pgs(rows, resp, vel_free, n)[0], rows) for n in (3, 30000)]
-    assert violation[-1] < 1e-9 < violation[0], violation
-    lam = run_pgs(rows, resp, vel_free, 30000)[0]
+    # 100,000 sweeps: seed 2's rows are nearly redundant (cond Q ≈ 6e9), PGS converges
+    # linearly and slowly there (1e-6 after 30,000 sweeps, 6e-15 after 100,000)
+    sweeps = (3, 100_000)
+    violation = [lcp_violation(q, c, run_pgs(rows, resp, vel_free, n)[0], rows) for n in sweeps]
+    assert violation[-1] < 1e-10 < violation[0], violation  # measured ≤ 1.9e-11 (seed 6)
+    lam = run_pgs(rows, resp, vel_free, sweeps[-1])[0]
     fixed = rows.fric_of >= 0
     bound = rows.mu[fixed] * lam[rows.fric_of[fixed]]
     lo, hi = rows.lo.copy(), rows.hi.copy()
     lo[fixed], hi[fixed] = -bound, bound
     no_friction_link = np.full(len(rows), -1)
     lam_qp = reference_solve(q, c, lo, hi, no_friction_link, rows.mu)
+    # measured 8.5e-7 on seed 2 (cond Q ≈ 6e9: the reference's rounding, cond·ε), ≤ 3.7e-8
+    # on the others
     assert np.abs(lam_qp - lam).max() < 1e-6 * max(1.0, np.abs(lam).max())
     lam_ref = reference_solve(q, c, rows.lo, rows.hi, rows.fric_of, rows.mu)
-    if lcp_violation(q, c, lam_ref, rows) < 1e-9:
-        assert np.abs(lam_ref - lam).max() < 1e-6 * max(1.0, np.abs(lam).max())
+    if lcp_violation(q, c, lam_ref, rows) < 1e-9:  # (six seeds: ≤ 1.2e-10; 0.01 and 0.1 else)
+        assert np.abs(lam_ref - lam).max() < 7.5e-8 * max(1.0, np.abs(lam).max())  # ≤ 1.5e-8
 
 
 def _response(rows, resp, lam, nbody):
@@ -158,8 +164,8 @@ def test_direct_equals_reference_on_equality_only_scenes(seed):
     assert ok
     q, c = dense_system(rows, resp, vel_free)
     lam_ref = reference_solve(q, c, rows.lo, rows.hi, rows.fric_of, rows.mu)
-    assert np.abs(lam - lam_ref).max() <= 1e-7 * max(1.0, np.abs(lam_ref).max())
-    assert residual < 1e-9
+    assert np.abs(lam - lam_ref).max() <= 2e-8 * max(1.0, np.abs(lam_ref).max())  # 4.3e-9
+    assert residual < 1.5e-14  # measured 2.7e-15
 
 
 def sweeps_to_reach(model, warm: bool, tol: float) -> float:
@@ -184,7 +190,7 @@ def test_warm_start_needs_fewer_iterations():
     model = build_model(chain(6, 0.005, collide=True, ground=0.95, rheo=rheology(2.0, 0.2, 5.0)))
     cold = sweeps_to_reach(model, False, 1e-4)
     warm = sweeps_to_reach(model, True, 1e-4)
-    assert warm < 0.5 * cold, (warm, cold)
+    assert warm < 0.08 * cold, (warm, cold)  # measured 7 and 449 sweeps a step (0.016)
 
 
 @pytest.mark.parametrize("limit", [0.5, 2.0, 1e6])
@@ -206,6 +212,6 @@ def test_direct_solve_with_a_saturated_grip_equals_the_reference(limit):
     q, c = dense_system(rows, resp, vel_free)
     lam_ref = reference_solve(q, c, rows.lo, rows.hi, rows.fric_of, rows.mu)
     assert ok
-    assert np.abs(lam - lam_ref).max() <= 1e-6 * max(1.0, np.abs(lam_ref).max())
+    assert np.abs(lam - lam_ref).max() <= 4e-9 * max(1.0, np.abs(lam_ref).max())  # 7.6e-10
     saturated = np.isclose(np.abs(lam), limit)
     assert saturated.any() == (limit < 100.0)

@@ -12,12 +12,17 @@ from rigbuild import chain
 
 from puppetcli.bench import stress
 from solver import quat
-from solver.advance.substep import SAFE_RATE, model_substeps, pointer_at, run_substeps
+from solver.advance.substep import model_substeps, pointer_at, run_substeps
 from solver.engine import Engine
 from solver.model import build_model
 from solver.pipeline import step
 from solver.rows.grip import Pointer
 from solver.state import State, StepInput, initial_state
+
+SAFE_RATE = 2.0
+"""h·ω per substep the step promises to stay below (docs/stress.md): the explicit
+integration of a joint's tension mode is unstable above about 2.9 (measured on the 100-link
+rope), 2 keeps a margin for tension growing during the step.  Stated here, not imported."""
 
 
 def needed_in_world(model, state: State) -> int:

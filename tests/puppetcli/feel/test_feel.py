@@ -57,13 +57,13 @@ def one_bone() -> dict:
 @pytest.mark.parametrize("axis", [0, 1])
 def test_one_bone_matches_the_closed_form(one_bone, axis) -> None:
     """Retention 2 s after release, spring-back angle q_f(T) and time constant D_f/K_f,
-    creep rate τ/D_d: measured 0.10 %, 0.11 %, 0.024 % and 0.08 % from the closed form (the
-    issue asks for 1 %; the tolerances are 3× today's)."""
+    creep rate τ/D_d: measured 0.10 %, 0.11 %, 0.024 % and 0.071 % from the closed form (the
+    issue asks for 1 %; the tolerances are 3–4× today's)."""
     kf, df, dd = _coefficients()
     measured = one_bone["joints"][0]["axes"][axis]["measured"]
     q_f = _elastic_at_end(kf, df, dd)
     theta = math.radians(measured["bend"])  # the bend the grip made (30° within 0.002 %)
-    assert theta == pytest.approx(ANGLE, rel=1e-4)
+    assert theta == pytest.approx(ANGLE, rel=7e-5)  # measured 1.4e-5
     retention = (theta - q_f * (1.0 - math.exp(-2.0 * kf / df))) / theta
     assert measured["retention"] == pytest.approx(retention, rel=3e-3)
     assert measured["springback_time"] == pytest.approx(df / kf, rel=1e-3)
@@ -74,10 +74,10 @@ def test_one_bone_matches_the_closed_form(one_bone, axis) -> None:
 
 def test_isolated_model_agrees_with_the_quadrature() -> None:
     """The stepped isolated joint (what feel prints beside its measures) and the closed
-    form above: q_f(T) to 1e-6."""
+    form above: q_f(T) to 8e-11 (measured 1.6e-11)."""
     kf, df, dd = _coefficients()
     bend = IsolatedJoint(kf, df, dd, math.inf).bend(ANGLE, TIME)
-    assert bend.elastic[-1] == pytest.approx(_elastic_at_end(kf, df, dd), rel=1e-6)
+    assert bend.elastic[-1] == pytest.approx(_elastic_at_end(kf, df, dd), rel=8e-11)
 
 
 def test_yield_holds_below_and_flows_above() -> None:
@@ -85,7 +85,7 @@ def test_yield_holds_below_and_flows_above() -> None:
     back); a bend that needs more torque flows and keeps part of it."""
     stiff = IsolatedJoint(100.0, 4.0, 20.0, 1e6)
     bend = stiff.bend(ANGLE, TIME)
-    assert not bend.flows and stiff.retention(bend, 100.0) == pytest.approx(0.0, abs=1e-9)
+    assert not bend.flows and stiff.retention(bend, 100.0) == pytest.approx(0.0, abs=1e-15)  # 0
     assert stiff.creep_rate(10.0) == 0.0
     soft = IsolatedJoint(100.0, 4.0, 20.0, 8.0)
     bend = soft.bend(ANGLE, TIME)

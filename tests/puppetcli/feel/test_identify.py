@@ -46,7 +46,7 @@ def test_the_doll_is_what_the_test_assumes() -> None:
 
 
 def test_clean_trace_gives_the_coefficients_back(trace, tmp_path) -> None:
-    """The model is the simulator's discretisation: found to 1e-9 (measured 1e-13)."""
+    """The model is the simulator's discretisation: found to 8e-15 (measured 1.6e-15)."""
     start = tmp_path / "start.yaml"
     start.write_text(rig_with_joints(DOLL.read_text(), {"forearm_l": START}))
     out = tmp_path / "fitted.yaml"
@@ -54,7 +54,7 @@ def test_clean_trace_gives_the_coefficients_back(trace, tmp_path) -> None:
     assert result.exit_code == 0, result.output
     fitted = {b.name: b for b in load_rig(out).bones}["forearm_l"].rheology
     found = np.array([fitted.kf[0], fitted.df[0], fitted.dd[0]])
-    assert np.abs(found / TRUE - 1.0).max() < 1e-9
+    assert np.abs(found / TRUE - 1.0).max() < 8e-15
     assert (tmp_path / "forearm_l-fit.png").stat().st_size > 0
     assert "# fitted by `puppetcli fit` to trace.mcap: kf 150" in out.read_text()
 
@@ -70,8 +70,8 @@ def test_one_percent_noise(trace) -> None:
         noisy_tau = tau + 0.01 * np.sqrt(np.mean(tau**2)) * rng.normal(size=tau.shape)
         fit = identify(t, noisy_rot, noisy_tau, tuple(START.values()), 4.5, 0.02, "forearm_l")
         errors.append(np.abs(np.array([fit.kf, fit.df, fit.dd]) / TRUE - 1.0).max())
-    assert np.median(errors) < 0.02
-    assert max(errors) < 0.035
+    assert np.median(errors) < 0.02  # measured 1.63 %
+    assert max(errors) < 0.035  # measured 3.04 %
 
 
 def test_data_errors_are_one_line(trace, tmp_path) -> None:

@@ -99,7 +99,7 @@ def test_the_replay_gives_the_live_keys(recorded):
     tmp, path, live_keys = recorded
     assert [k.label for k in live_keys] == ["raised", "key 2"]  # "undone" was undone
     keys = replay(path, tmp / "out")
-    assert worst_difference(live_keys, keys) < 1e-12  # measured 0: the same floats
+    assert worst_difference(live_keys, keys) == 0.0  # the same floats
 
 
 def test_the_elbow_kept_most_of_its_bend(recorded):
@@ -116,7 +116,7 @@ def test_the_session_holds_a_devices_record(recorded):
     session = read_session(path)
     assert session.complete and session.counts is None
     ticks = session.pose_time
-    np.testing.assert_allclose(np.diff(ticks), 0.001, atol=1e-12)  # every 1 ms tick
+    np.testing.assert_allclose(np.diff(ticks), 0.001, rtol=0, atol=2e-15)  # 1 ms ticks: 3.3e-16
     buttons = [(e.message["button"], e.message["state"]) for e in session.events]
     assert buttons[0] == ("touch", "up")  # live touching starts off
     for event in [("grip", "down"), ("grip", "up"), ("key", "down"), ("undo", "down"),
@@ -146,7 +146,7 @@ def test_a_killed_recording_replays_up_to_its_last_flush(recorded):
     killed = tmp / "killed.mcap"
     assert not read_session(killed).complete
     keys = replay(killed, tmp / "killed-out")
-    assert worst_difference(live_keys[:1], keys) < 1e-12  # measured 0
+    assert worst_difference(live_keys[:1], keys) == 0.0  # the same floats
 
 
 def test_touching_follows_the_touch_switch(tmp_path):
@@ -178,7 +178,7 @@ def test_touching_follows_the_touch_switch(tmp_path):
         return peak
 
     assert sweep(None) == 0.0
-    assert sweep(0.25) > 50.0  # measured 594 N at 1 m/s: the ball strikes the forearm
+    assert sweep(0.25) > 120.0  # measured 594 N at 1 m/s: the ball strikes the forearm
     assert sweep(0.0) == 0.0  # switched on inside the forearm: suspended until clear
 
 

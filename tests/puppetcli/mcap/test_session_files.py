@@ -12,6 +12,7 @@ from click.testing import CliRunner
 from mcap.reader import make_reader
 from mcap.stream_reader import StreamReader
 from mcap.writer import CompressionType, Writer
+from scipy.stats import norm
 
 from puppetcli.cli import cli
 from puppetcli.mcap.session import CHANNELS, METADATA_NAME, read_session
@@ -69,7 +70,7 @@ def test_session_and_trace_read_back_with_the_official_reader(wave_session, tmp_
     assert [m["t"] for m in counts[:3]] == [0.0, 0.001, 0.002]
     grips = [m for m in messages["/spidar/buttons"] if m["button"] == "grip"]
     assert [(m["state"], m.get("bone")) for m in grips] == [("down", "forearm_l"), ("up", None)]
-    assert grips[0]["point"] == pytest.approx([0.24, 0.0, 0.0], abs=1e-12)
+    assert grips[0]["point"] == pytest.approx([0.24, 0.0, 0.0], abs=3e-16)  # measured 5.5e-17
     labels = [m["label"] for m in messages["/spidar/buttons"] if m.get("label")]
     assert labels == ["rest", "raised", "held"]
     with open(wave_session, "rb") as f:
@@ -92,14 +93,15 @@ def test_session_and_trace_read_back_with_the_official_reader(wave_session, tmp_
     dev = preset("SpidarG6X3R")
     for m in trace["/spidar/tensions"][::50]:
         t = np.array(m["tensions"])
-        assert np.all(t >= dev.t_min - 1e-9) and np.all(t <= dev.t_max + 1e-9)
+        assert np.all(t >= dev.t_min) and np.all(t <= dev.t_max)  # t_min reached exactly
     # The displayed force is Aᵀt at the estimated pose: recompute it independently.
     k = steps // 2
     est, shown = trace["/spidar/estimate"][k], trace["/spidar/tensions"][k]
     a = structure_matrix(dev, np.array(est["device"]["position"]), est["device"]["orientation"])
     wrench = a.T @ np.array(shown["tensions"])
-    np.testing.assert_allclose(wrench[:3], shown["displayed"]["force"], atol=1e-9)
-    np.testing.assert_allclose(wrench[3:], shown["displayed"]["torque"], atol=1e-9)
+    # measured 0 (the same floats through JSON); 1e-14: rounding of forces of ~10 N
+    np.testing.assert_allclose(wrench[:3], shown["displayed"]["force"], rtol=0, atol=1e-14)
+    np.testing.assert_allclose(wrench[3:], shown["displayed"]["torque"], rtol=0, atol=1e-14)
 
 
 def test_record_is_deterministic_and_noise_changes_counts_only_a_little(wave_session, tmp_path):
@@ -111,8 +113,13 @@ def test_record_is_deterministic_and_noise_changes_counts_only_a_little(wave_ses
         assert run("record", DOLL, WAVE, "-o", path, "--noise", 1.5, "--seed", 7).exit_code == 0
     assert noisy.read_bytes() == noisy2.read_bytes()
     clean, dirty = read_session(wave_session).counts, read_session(noisy).counts
+    # σ = 1.5 rounded to whole counts: at most 8σ (measured 6), and the standard deviation
+    # of rint(N(0, σ²)), summed over its integers (within 5 standard errors of a standard
+    # deviation from 28,008 samples, 0.42 %; measured 0.39 % off)
     assert np.any(clean != dirty) and np.abs(clean - dirty).max() <= 12
-    assert np.std(clean - dirty) == pytest.approx(1.5, rel=0.15)
+    k = np.arange(-20, 21)
+    rounded_sd = np.sqrt(np.sum(k**2 * (norm.cdf((k + 0.5) / 1.5) - norm.cdf((k - 0.5) / 1.5))))
+    assert np.std(clean - dirty) == pytest.approx(rounded_sd, rel=0.021)
     for name, path in (("clean", wave_session), ("noisy", noisy)):
         assert run("pose", DOLL, path, "-o", tmp_path / name, "--no-render").exit_code == 0
     _, a = read_keyframes(tmp_path / "clean" / "keyframes.json")
@@ -120,7 +127,7 @@ def test_record_is_deterministic_and_noise_changes_counts_only_a_little(wave_ses
     for ka, kb in zip(a, b, strict=True):
         for bone in ka.bones:
             d = 2 * np.arccos(min(1.0, abs(np.dot(ka.bones[bone].local, kb.bones[bone].local))))
-            assert np.degrees(d) < 0.5
+            assert np.degrees(d) < 0.4  # measured 0.079°
 
 
 def test_replay_at_another_physics_step(tmp_path):

@@ -15,7 +15,7 @@ from puppetcli.run.keyframes import read_keyframes
 ROOT = Path(__file__).resolve().parents[3]
 DOLL = ROOT / "rigs/doll.yaml"
 DOLL_SCRIPTS = ["wave", "head_twist", "kneel", "hand_on_table", "free_push", "arm_push"]
-TOLERANCE_DEG = 0.5
+TOLERANCE_DEG = 0.5  # measured: 0.175° (free_push), 0.173° (hand_on_table), 0.14° (wave)
 
 
 def run(*args) -> object:
@@ -46,7 +46,7 @@ def test_session_replays_like_its_script(name, tmp_path):
         assert direct.stdout.splitlines()[-1] == replay.stdout.splitlines()[-1]
     a, b = keys_of(tmp_path / "direct"), keys_of(tmp_path / "replay")
     assert [k.label for k in a] == [k.label for k in b]
-    assert [k.time for k in a] == pytest.approx([k.time for k in b], abs=1e-9)
+    assert [k.time for k in a] == [k.time for k in b]  # measured: the same steps
     worst = max(
         joint_angle_difference(ka.bones[bone].local, kb.bones[bone].local)
         for ka, kb in zip(a, b, strict=True)

@@ -17,6 +17,12 @@ between OpenCV builds but not a moved limb.  Measured (96 × 96, every view): Op
 pixel-to-pixel comparison: 1.5 levels and 1.7 %, which failed the previous 1 % bound);
 the arm moved 10° (the test below), mean 0.8–1.0 and 0.9 %; 5°, 0.26–0.33 %; another
 view, 16–35 % outliers.
+
+A picture is accepted (and a regenerated one written) only when its joint dots also lie
+where an independent projection puts them (``joint_marks``: forward kinematics from the
+rig file, ``cv2.projectPoints`` with the frame's camera): the neighbourhood comparison
+holds today's picture to the stored one, the dots hold both to the geometry, so a wrong
+projection present when the goldens were made cannot hide in them.
 """
 
 from __future__ import annotations
@@ -27,9 +33,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from joint_marks import GOLDEN_ARM_DEG, check_joint_marks
 from test_render_fixtures import doll, key
 
-from puppetcli.render.picture import frame_poses, poses_from_keys, render_pose
+from puppetcli.render.camera import Camera
+from puppetcli.render.picture import Framing, Pose, frame_poses, poses_from_keys, render_pose
+from puppetcli.rig.skeleton import Skeleton
+from solver.spec import RigSpec
 
 GOLDEN = Path(__file__).resolve().parent / "golden"
 REGENERATE = os.environ.get("PUPPETCLI_REGEN_GOLDEN") == "1"
@@ -40,11 +50,22 @@ OUTLIER_LEVEL = 32
 OUTLIER_SHARE = 0.003
 
 
-def picture(view: str) -> np.ndarray:
-    """The golden scene: the doll with props, left arm raised 40°, labelled, at t = 1.25 s."""
+def scene(view: str) -> tuple[Skeleton, Pose, RigSpec, Framing]:
+    """The golden scene: the doll with props, left arm raised 40°, labelled, at t = 1.25 s,
+    and its framing in ``view``."""
     spec, skel = doll(props=True)
-    poses = poses_from_keys(skel, [key(skel, 40.0, 1.25, "golden")])
-    return render_pose(skel, poses[0], spec, frame_poses(skel, poses, spec, view, SIZE))
+    poses = poses_from_keys(skel, [key(skel, GOLDEN_ARM_DEG, 1.25, "golden")])
+    return skel, poses[0], spec, frame_poses(skel, poses, spec, view, SIZE)
+
+
+def framed(view: str) -> tuple[np.ndarray, Camera]:
+    """(picture, its camera) of the golden scene."""
+    skel, pose, spec, framing = scene(view)
+    return render_pose(skel, pose, spec, framing), framing.camera
+
+
+def picture(view: str) -> np.ndarray:
+    return framed(view)[0]
 
 
 def _nearest(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -73,13 +94,15 @@ def matches(a: np.ndarray, b: np.ndarray) -> bool:
 @pytest.mark.parametrize("view", VIEWS)
 def test_matches_golden(view: str) -> None:
     path = GOLDEN / f"render_{view}.png"
-    img = picture(view)
+    img, camera = framed(view)
+    check_joint_marks(img, camera, view)
     if REGENERATE:
         GOLDEN.mkdir(exist_ok=True)
         cv2.imwrite(str(path), img)
         pytest.skip(f"regenerated {path.name}: look at it before committing")
     golden = cv2.imread(str(path), cv2.IMREAD_COLOR)
     assert golden is not None, f"missing {path}; see this module's docstring"
+    check_joint_marks(golden, camera, view)
     mean, share = difference(img, golden)
     assert mean < MEAN_TOLERANCE and share < OUTLIER_SHARE, (view, mean, share)
 

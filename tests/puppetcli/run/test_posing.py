@@ -54,8 +54,8 @@ def pulled():
 def test_plastic_posing_keeps_most_of_the_new_angle(pulled):
     _, result, _ = pulled
     released, after = (rotation_of(k, "forearm_l") for k in result.keys)
-    assert np.degrees(np.linalg.norm(released)) > 15.0
-    assert np.linalg.norm(after) > 0.85 * np.linalg.norm(released)
+    assert np.degrees(np.linalg.norm(released)) > 15.0  # measured 23.2°
+    assert np.linalg.norm(after) > 0.85 * np.linalg.norm(released)  # measured 92.7 %
 
 
 def test_spring_back_is_the_elastic_part_at_release(pulled):
@@ -74,7 +74,7 @@ def test_spring_back_is_the_elastic_part_at_release(pulled):
     bound = 0.5 * np.linalg.norm(joint_rotations(model, at_release)[j]) * np.linalg.norm(elastic)
     bound += flow * model.options.h / model.joint_dd[j, 0]
     assert np.degrees(np.linalg.norm(elastic)) > 1.0  # a visible spring-back
-    assert np.linalg.norm(spring_back - elastic) <= bound
+    assert np.linalg.norm(spring_back - elastic) <= bound  # measured 0.60 of it
 
 
 def test_elastic_part_at_rest_balances_the_joint_torque(pulled):
@@ -82,7 +82,8 @@ def test_elastic_part_at_rest_balances_the_joint_torque(pulled):
     model, _, log = pulled
     j = model.joint_names.index("forearm_l")
     end = log[-1]
-    assert end.joint_q_sf[j] == pytest.approx(-end.joint_torque[j] / model.joint_kf[j], abs=2e-3)
+    # measured 1.1e-5 rad (of 0.02 rad)
+    assert end.joint_q_sf[j] == pytest.approx(-end.joint_torque[j] / model.joint_kf[j], abs=6e-5)
 
 
 def test_pure_voigt_joint_returns_to_rest_but_for_its_gravity_sag():
@@ -98,7 +99,7 @@ def test_pure_voigt_joint_returns_to_rest_but_for_its_gravity_sag():
     )
     sag = np.linalg.norm(torque) / model.joint_kf[j, 0]  # static Voigt deflection τ/K_f
     assert np.linalg.norm(after) == pytest.approx(sag, rel=1e-3)  # measured 2.0e-4
-    assert np.linalg.norm(after) < 0.4 * np.linalg.norm(released)
+    assert np.linalg.norm(after) < 0.4 * np.linalg.norm(released)  # measured 0.28
 
 
 def test_twisting_the_gripped_hand_twists_the_wrist():
@@ -107,9 +108,16 @@ def test_twisting_the_gripped_hand_twists_the_wrist():
         "actions:\n  - grip: hand_l\n  - twist: {angle: 45, duration: 1.0}\n  - wait: 0.5\n"
     )
     rot = np.degrees(joint_rotations(model, runner.state)[model.joint_names.index("hand_l")])
-    # about the forearm's axis (+x at rest); measured 42.2°: the couplings' compliance
-    assert rot[0] == pytest.approx(45.0, abs=5.0)
-    assert np.hypot(rot[1], rot[2]) < 3.0
+    # About the forearm's axis (+x at rest).  The wrist yields and flows until its torque
+    # falls to its yield torque τ_y; at rest that torque holds, elastically, the grip's
+    # rotational spring (the script's default, 50 N·m/rad) and every joint between the
+    # stand and the wrist, in series: the wrist turns 45° less τ_y·(1/50 + Σ 1/K_f).
+    wrist = model.joint_names.index("hand_l")
+    chain = [model.joint_names.index(n) for n in ("spine", "chest", "upper_arm_l", "forearm_l")]
+    compliance = 1.0 / 50.0 + sum(1.0 / model.joint_kf[j, 0] for j in chain)
+    expected = 45.0 - np.degrees(model.joint_yield[wrist] * compliance)  # 42.228°
+    assert rot[0] == pytest.approx(expected, abs=0.06)  # measured 42.240°
+    assert np.hypot(rot[1], rot[2]) < 3.0  # measured 1.06°
 
 
 def test_posing_the_left_arm_leaves_the_right_leg_alone(pulled):
@@ -120,7 +128,7 @@ def test_posing_the_left_arm_leaves_the_right_leg_alone(pulled):
     for posed, still in zip(result.keys, alone.keys, strict=True):
         for bone in ("thigh_r", "shin_r", "foot_r"):
             moved = quat.log(quat.mul(posed.bones[bone].local, quat.conj(still.bones[bone].local)))
-            assert np.degrees(np.linalg.norm(moved)) < 1.0
+            assert np.degrees(np.linalg.norm(moved)) < 1e-9  # measured 0: the same floats
 
 
 def test_hand_pushed_onto_the_table_stops_on_it():

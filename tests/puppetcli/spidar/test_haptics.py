@@ -37,7 +37,11 @@ def runner_for(script: str) -> Runner:
 
 
 def test_coupling_force_is_the_backward_euler_spring_damper():
-    # λ = −K (e[t+1]) − D (v[t+1] − u): recomputed from the state after each step.
+    # λ = −K (e[t+1]) − D (v[t+1] − u): recomputed from the state after each step.  The row
+    # moves the grip point along its tangent, ω × r, while the bone turns it on an arc: the
+    # point ends ½h²|ω|²|r| off (K's share) and its velocity h|ω|²|r| (D's share), so the
+    # two differ by (½Kh + D)·h·|ω|²·|r| at most (measured: up to that, to 2e-8 of it);
+    # 1 % more for the next order (hω ≤ 0.01 here).
     runner = runner_for(PULL.format(settings="", k=2000, d=40, t=1.0))
     runner.batch_steps = False  # every step through _after_step, to see each one
     seen = []
@@ -50,6 +54,7 @@ def test_coupling_force_is_the_backward_euler_spring_damper():
     runner._after_step = spy
     runner.run()
     c = runner.coupling
+    h = runner.model.options.h
     checked = 0
     for inp, report, s in seen:
         if inp.coupling is None or np.abs(report.grip_force).max() >= c.force_limit:
@@ -59,7 +64,8 @@ def test_coupling_force_is_the_backward_euler_spring_damper():
         target = ptr.pos + quat.rotate(ptr.quat, c.offset)
         v_point = s.body_vel[b] + np.cross(s.body_omega[b], r)
         expected = -c.stiffness * (s.body_pos[b] + r - target) - c.damping * (v_point - ptr.vel)
-        assert report.grip_force == pytest.approx(expected, rel=0.02, abs=0.05)
+        arc = (0.5 * c.stiffness * h + c.damping) * h * (s.body_omega[b] @ s.body_omega[b])
+        assert np.abs(report.grip_force - expected).max() <= 1.01 * arc * np.linalg.norm(r)
         checked += 1
     assert checked > 100
 
@@ -79,12 +85,13 @@ def test_displayed_wrench_is_minus_the_coupling_wrench_clamped_to_the_device(tmp
     for _, msg in wrench:
         req = np.array(msg["requested"]["force"])
         shown = np.array(msg["displayed"]["force"])
-        assert np.linalg.norm(shown) <= 20.0 + 1e-9
+        assert np.linalg.norm(shown) <= 20.0 + 2e-14  # rounding
         if np.linalg.norm(req) <= 20.0:
-            assert shown == pytest.approx(req, abs=1e-12)
+            assert np.array_equal(shown, req)  # measured: the same floats
         else:  # attenuated along the same direction, never faked
             clamped += 1
-            assert shown == pytest.approx(req * 20.0 / np.linalg.norm(req), abs=1e-9)
+            expected = req * 20.0 / np.linalg.norm(req)
+            assert shown == pytest.approx(expected, abs=2e-14)  # measured 3.6e-15 N
     assert clamped > 0
 
 
@@ -95,7 +102,7 @@ def test_stiff_coupling_at_large_step_stays_stable(h):
     runner.on_step = lambda s: energy.append(kinetic_energy(runner.model, s))
     result = runner.run()
     assert result.error is None
-    assert max(energy) < 5.0  # J: a pose being dragged, not an explosion
+    assert max(energy) < 0.9  # J: a pose being dragged (measured 0.18), not an explosion
 
 
 def test_a_one_metre_jump_of_the_pointer_in_one_step_does_not_explode():
@@ -109,7 +116,7 @@ def test_a_one_metre_jump_of_the_pointer_in_one_step_does_not_explode():
     result = runner.run()
     assert result.error is None
     assert result.peak_force <= np.sqrt(3) * 300.0 + 1e-6  # the per-axis force limit holds
-    assert max(speeds) < 10.0
+    assert max(speeds) < 10.0  # m/s: measured 5.5
 
 
 def test_haptic_chain_over_many_steps_is_the_chain_step_by_step():
@@ -127,4 +134,4 @@ def test_haptic_chain_over_many_steps_is_the_chain_step_by_step():
         assert np.array_equal(np.signbit(rows), np.signbit(shown))
         assert one.filtered == many.filtered
         assert np.array_equal(np.signbit(one.filtered), np.signbit(many.filtered))
-        assert (np.linalg.norm(shown[:, :3], axis=1) <= 20.0 + 1e-12).all()
+        assert (np.linalg.norm(shown[:, :3], axis=1) <= 20.0 + 2e-14).all()  # over: ≤ 3.6e-15
