@@ -42,7 +42,7 @@ with warnings.catch_warnings():  # bvhio imports PyGLM the way PyGLM now depreca
 
 ROOT = Path(__file__).resolve().parents[3]
 DOLL = Skeleton.from_spec(load_rig(ROOT / "rigs" / "doll.yaml"))
-SETTINGS = settings(max_examples=12, derandomize=True, deadline=None)
+SETTINGS = settings(max_examples=8, derandomize=True, deadline=None)
 
 # Tolerances: about 5× the worst error measured over 6,000 random examples (all six orders,
 # gimbal lock included), the measured value in the comment.
