@@ -237,7 +237,7 @@ def test_an_unsaturated_grip_is_a_backward_euler_spring_damper(scene, engine, me
     r_b = body.apply(c.anchor)
     e = state.body_pos[b] + r_b - (ptr.pos + turn.apply(c.offset))
     u = ptr.vel + np.cross(ptr.omega, turn.apply(c.offset))
-    (omega_next,) = kkt_velocities(run, state, new)[b : b + 1, 3:]
+    omega_next = kkt_velocities(run, state, new)[b, 3:]
     w = new.body_vel[b] + np.cross(omega_next, r_b)
     force = -c.stiffness * (e + h * w) - c.damping * (w - u)
     e_rot = (body * target_rot.inv()).as_rotvec()

@@ -155,6 +155,14 @@ def folder(tmp_path_factory) -> Path:
     return tmp_path_factory.mktemp("bvh_roundtrip")
 
 
+def write_motion(folder: Path, name: str, data, skel, order: str, scale: float):
+    """(root, local, path): a drawn motion of ``skel`` written by puppetcli to folder/name."""
+    root, local = data.draw(motions(skel))
+    path = folder / name
+    write_keys_bvh(path, skel, keys_of(skel, root, local), order=order, scale=scale)
+    return root, local, path
+
+
 # ---- puppetcli writes, the `bvh` package reads ----
 
 
@@ -163,9 +171,7 @@ def folder(tmp_path_factory) -> Path:
 @given(data=st.data(), skel=skeletons, scale=st.sampled_from([1.0, 100.0]))
 def test_bvh_package_reads_the_chosen_rotations_and_root_positions(folder, order, data, skel,
                                                                    scale) -> None:  # fmt: skip
-    root, local = data.draw(motions(skel))
-    path = folder / "written.bvh"
-    write_keys_bvh(path, skel, keys_of(skel, root, local), order=order, scale=scale)
+    root, local, path = write_motion(folder, "written.bvh", data, skel, order, scale)
     mocap = bvh_package.Bvh(path.read_text())
     names = mocap.get_joints_names()
     assert sorted(names) == sorted(skel.names)
@@ -204,9 +210,7 @@ def test_bvh_package_reads_the_chosen_rotations_and_root_positions(folder, order
 @given(data=st.data(), skel=skeletons, scale=st.sampled_from([1.0, 100.0]))
 def test_bvhio_puts_joints_where_scipy_forward_kinematics_does(folder, order, data, skel,
                                                                scale) -> None:  # fmt: skip
-    root, local = data.draw(motions(skel))
-    path = folder / "fk.bvh"
-    write_keys_bvh(path, skel, keys_of(skel, root, local), order=order, scale=scale)
+    root, local, path = write_motion(folder, "fk.bvh", data, skel, order, scale)
     hierarchy = bvhio.readAsHierarchy(str(path))
     joints = {joint.Name: joint for joint, _, _ in hierarchy.layout()}
     assert sorted(joints) == sorted(skel.names)
