@@ -64,6 +64,9 @@ class Options:
     sleep_spin (rad/s), are frozen until touched (solver.advance.sleep).
     engine: "compiled" (the numba step, solver.compiled) or "numpy" (the readable
     step, solver.pipeline): the implementation solver.Engine runs.
+    integrator: "euler" (the paper's step: backward Euler on the joints, semi-implicit
+    Euler on the bodies, first order) or "bdf2" (second order, L-stable:
+    solver.advance.bdf2).
     """
 
     h: float = 0.005
@@ -90,6 +93,7 @@ class Options:
     sleep_spin: float = 5e-3
     sleep_time: float = 0.2
     engine: str = "compiled"
+    integrator: str = "euler"
 
 
 @dataclass(frozen=True)
@@ -213,6 +217,7 @@ def build_model(spec: RigSpec) -> Model:
         iterations=s.iterations,
         warm_start=s.warm_start,
         warm_start_factor=s.warm_start_factor,
+        integrator=s.integrator,
         gravity=np.asarray(spec.gravity, dtype=float),
     )
     return Model(

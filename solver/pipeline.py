@@ -15,16 +15,18 @@ q_sf     = rheology_update(rows, v)          with the SOLVED velocity w_s[t+1]
 from __future__ import annotations
 
 from dataclasses import replace
+from functools import partial
 
 import numpy as np
 
 from solver import quat
+from solver.advance import bdf2
 from solver.advance.integrate import free_velocity, integrate_pose
 from solver.advance.monitor import check_state
 from solver.advance.rheology import rheology_update
 from solver.advance.sleep import body_islands, settle, wake
 from solver.advance.stabilize import project_joints
-from solver.advance.substep import model_substeps, run_substeps
+from solver.advance.substep import model_substeps, run_parts, run_substeps, sub_model
 from solver.collide.pointer import POINTER_KEY_OFFSET
 from solver.errors import SimulationError
 from solver.model import Model
@@ -33,6 +35,7 @@ from solver.rows.grip import coupling_wrench
 from solver.rows.joints import (
     flowing,
 )
+from solver.rows.shift import shifted, velocity_share
 from solver.rows.table import KEY_SHIFT, KIND_CONTACT, KIND_FRICTION, Rows
 from solver.solve.dispatch import solve
 from solver.solve.response import regularize, row_response, world_inverse_inertia
@@ -46,31 +49,55 @@ def step(model: Model, state: State, inp: StepInput | None = None) -> tuple[Stat
     body_rot = quat.matrix(state.body_quat)
     n = model_substeps(model, state)
     if n > 1:
-        return run_substeps(model, state, inp, n, step)
+        return run_substeps(model, state, inp, n, partial(_part, model))
+    if bdf2.restarts(model, state, inp):
+        return run_parts(model, state, inp, bdf2.RESTART, partial(_part, model))
     return _step_once(model, state, inp, body_rot)
+
+
+def _part(model: Model, d: int, state: State, inp: StepInput) -> tuple[State, StepReport]:
+    """A step h/d of ``model`` (one of a step's parts: solver.advance.substep.run_parts)."""
+    return step(sub_model(model, d), state, inp)
 
 
 def _step_once(
     model: Model, state: State, inp: StepInput, body_rot: np.ndarray
 ) -> tuple[State, StepReport]:
     h = model.options.h
+    bdf = model.options.integrator == "bdf2"
+    load = bdf2.load(inp, model.nbody) if bdf else 0.0
+    pred = bdf2.prediction(model, state, load) if bdf else None
+    # The stage: the paper's step from the state, or BDF2's from the predicted end pose.
+    sm = bdf2.stage_model(model, pred.gamma) if bdf else model
+    start = bdf2.stage_state(state, pred) if bdf else state
+    rot = quat.matrix(pred.quat) if bdf else body_rot
     asleep, still, fresh = wake(model, state, inp)
-    inv_i = world_inverse_inertia(model.body_inv_inertia, body_rot)
-    vel_free = free_velocity(model, state, inp, inv_i)
+    inv_i = world_inverse_inertia(model.body_inv_inertia, rot)
+    vel_free = free_velocity(sm, start, inp, inv_i)
     vel_free[asleep] = 0.0
-    rows, ncontact, rheo_joint = build_rows(model, state, body_rot, vel_free, inp, asleep)
-    resp = row_response(rows, model.body_inv_mass, inv_i, h)
+    if bdf:
+        pred.shift[asleep] = 0.0
+    moving = vel_free + pred.shift if bdf else vel_free  # contacts' slip directions
+    rows, ncontact, rheo_joint = build_rows(sm, start, rot, moving, inp, asleep)
+    if bdf:
+        share = velocity_share(model, rows, state.joint_yielded, inp.coupling)
+        rows = shifted(rows, share, pred.shift)
+    resp = row_response(rows, model.body_inv_mass, inv_i, sm.options.h)
     rows = regularize(rows, resp, model.options.regularization)
     try:
-        lam, vel, iters, residual, used = solve(model, state, rows, resp, vel_free)
+        lam, vel, iters, residual, used = solve(sm, start, rows, resp, vel_free)
     except ValueError as exc:
         raise SimulationError(str(exc), state.step, state.time, None) from None
-    check_state(model, state.step, state.time, state.body_pos, state.body_quat, vel)
-    pos, q, omega = integrate_pose(model, state, vel, body_rot)
+    if bdf:
+        pos, q, vel, omega = bdf2.integrate_stage(model, pred, vel)
+        check_state(model, state.step, state.time, state.body_pos, state.body_quat, vel)
+    else:
+        check_state(model, state.step, state.time, state.body_pos, state.body_quat, vel)
+        pos, q, omega = integrate_pose(model, state, vel, body_rot)
     pos[asleep], q[asleep], omega[asleep] = state.body_pos[asleep], state.body_quat[asleep], 0.0
     pos, q = project_joints(model, pos, q, asleep=asleep)
     check_state(model, state.step, state.time, pos, q, np.concatenate((vel[:, :3], omega), 1))
-    rheo = rheology_update(model, state, rows, vel, lam, rheo_joint, q)
+    rheo = rheology_update(sm, start, rows, vel, lam, rheo_joint, q)
     frozen = asleep[model.joint_bone]  # their torque reads 0: no rows
     for name in ("joint_q_sf", "joint_yielded", "joint_anchor", "joint_torque_avg"):
         rheo[name][frozen] = getattr(state, name)[frozen]
@@ -82,19 +109,18 @@ def _step_once(
             model.options.sleep_speed, model.options.sleep_spin, model.options.sleep_time, fresh,
         )  # fmt: skip
     order = np.argsort(rows.key, kind="stable")
+    now = dict(body_pos=pos, body_quat=q, body_vel=lin, body_omega=omega, **rheo)
+    kept = state.joint_yielded == rheo["joint_yielded"]
     new = replace(
         state,
         time=state.time + h,
         step=state.step + 1,
-        body_pos=pos,
-        body_quat=q,
-        body_vel=lin,
-        body_omega=omega,
         warm_key=rows.key[order],
         warm_lam=lam[order],
         body_asleep=asleep,
         body_still=still,
-        **rheo,
+        **now,
+        **(bdf2.history(state, h, load, now, kept) if bdf else {}),
     )
     grip_force, grip_torque = coupling_wrench(rows, lam)
     return new, StepReport(

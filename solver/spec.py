@@ -143,6 +143,7 @@ class SolverSpec:
     iterations: PGS sweeps.  warm_start: reuse the previous step's impulses.
     warm_start_factor: scale on the reused impulses (1.0 = all of it; the
         reference implementation used 0.7).
+    integrator: "euler" (the paper's step) or "bdf2" (second order: solver.advance.bdf2).
     """
 
     h: float = 0.005
@@ -150,6 +151,7 @@ class SolverSpec:
     iterations: int = 15
     warm_start: bool = True
     warm_start_factor: float = 1.0
+    integrator: str = "euler"
 
 
 @dataclass(frozen=True)

@@ -29,6 +29,13 @@ class State:
     warm_key (n,) int64 sorted, warm_lam (n,): row forces of the last step by row key.
     body_asleep (nb,) bool: the body's island sleeps (solver.advance.sleep); body_still (nb,) s:
         how long its island has been at rest.  Empty arrays mean all awake.
+    prev_pos (nb,3), prev_quat (nb,4), prev_vel (nb,3), prev_omega (nb,3), prev_q_sf
+        (nj,3): the previous step's values, for the second-order step
+        (solver.advance.bdf2); prev_h (s): that step's length (0: no history, the next
+        step starts afresh); prev_mark: the fingerprint of the state they lead to (a
+        state changed after its step no longer matches it); prev_load: that step's
+        input's (a step whose loads, grip or pointer mode differ starts afresh).  Empty
+        under the paper's integrator.
     """
 
     time: float
@@ -46,6 +53,14 @@ class State:
     warm_lam: np.ndarray = field(default_factory=lambda: np.zeros(0))
     body_asleep: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     body_still: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    prev_pos: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    prev_quat: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))
+    prev_vel: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    prev_omega: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    prev_q_sf: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
+    prev_h: float = 0.0
+    prev_mark: float = 0.0
+    prev_load: float = 0.0
 
 
 @dataclass(frozen=True)

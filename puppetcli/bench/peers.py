@@ -75,7 +75,7 @@ def mujoco_version() -> str | None:
 
 
 @contextmanager
-def _quiet(mujoco):
+def quiet(mujoco):
     """MuJoCo's warnings go to its counters (``warnings``) only, not to stdout."""
     previous = mujoco.get_mju_user_warning()
     mujoco.set_mju_user_warning(lambda message: None)
@@ -136,7 +136,7 @@ def run(peer: Peer, steps: int, record=None, at=()) -> tuple[float, float, list]
     mocap, ctrl = peer.mocap_pos, peer.ctrl
     grip = len(mocap) > 0
     marks, out, ncon, wall = set(at), [], 0, 0.0
-    with _quiet(mujoco):
+    with quiet(mujoco):
         start = time.perf_counter()
         for k in range(steps):
             if grip:

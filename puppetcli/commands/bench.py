@@ -81,6 +81,13 @@ SOLVER_CHOICES = [*SOLVERS, "reference"]
     "--solver, --engine, --seconds, --csv).",
 )
 @click.option(
+    "--accuracy",
+    is_flag=True,
+    help="Measure error against run time on like-for-like scenes instead: ours (bdf2 and "
+    "the paper's euler) and MuJoCo (Euler, implicitfast, RK4; needs the bench extra) "
+    "against a DOP853 truth, an equal-time table, and our large steps (50–250 ms).",
+)
+@click.option(
     "--skips",
     is_flag=True,
     help="Measure each skip of unneeded work on and off instead (puppetcli/bench/skips.py).",
@@ -109,7 +116,8 @@ SOLVER_CHOICES = [*SOLVERS, "reference"]
     "--out",
     "out_dir",
     type=click.Path(file_okay=False, path_type=Path),
-    help="With --precision: write precision.csv and precision.png into this directory "
+    help="With --precision or --accuracy: write precision.csv and precision.png (or "
+    "accuracy.csv) into this directory "
     "(created if missing; those two files are replaced).",
 )
 @JSON_OPTION
@@ -121,6 +129,7 @@ def command(
     csv_path: Path | None,
     peers: bool,
     precision: bool,
+    accuracy: bool,
     skips: bool,
     live: bool,
     pose: bool,
@@ -145,6 +154,11 @@ def command(
     After the table, where a doll step's time goes, stage by stage (read from the
     processor's cycle counter inside the compiled step).  With --skips: each skip of
     unneeded work (pair culling, dormant rows, the direct solve) on and off.
+
+    With --accuracy: error against run time on like-for-like scenes (puppetcli/bench/
+    likeforlike.py: Voigt chains and the doll, released or pulled, no contacts) for our two
+    integrators and MuJoCo's Euler, implicitfast and RK4, against a DOP853 truth of the
+    same equations; each engine's time to reach 3, 1, 0.3 and 0.1 mm; our large steps.
 
     With --precision: the work-precision study (puppetcli/bench/precision.py): creep against
     its exact solution, a 10-link chain after 1 s and 3 s and the gripped doll against
@@ -180,6 +194,9 @@ def command(
         rows = measure_skips(steps_h[0], seconds)
         emit({"skips": rows_json(rows)}, [format_skips(rows, steps_h[0])])
         return
+    if accuracy:
+        _accuracy(out_dir, _peers_available())
+        return
     use_peers = peers and _peers_available()
     if precision:
         _precision(quick, out_dir, use_peers)
@@ -203,6 +220,25 @@ def _peers_available() -> bool:
     version = peers.mujoco_version()
     click.echo(INSTALL_HINT if version is None else f"peers: MuJoCo {version}", err=True)
     return version is not None
+
+
+def _accuracy(out_dir: Path | None, peers: bool) -> None:
+    from puppetcli.bench import likeforlike as lfl
+
+    runs = lfl.study(peers=peers)
+    large = lfl.large_steps()
+    rows = lfl.equal_time(runs)
+    written = []
+    if out_dir is not None:
+        out_dir.mkdir(parents=True, exist_ok=True)
+        path = out_dir / "accuracy.csv"
+        write_text_atomic(path, lfl.csv_text(runs + large))
+        written.append(path)
+    lines = [lfl.format_runs(runs), "", lfl.format_equal_time(rows), "",
+             "large steps (RMS error at t = 1 and 2 s):", lfl.format_runs(large),
+             *(f"wrote {p}" for p in written)]  # fmt: skip
+    emit({"runs": rows_json(runs), "equal_time": rows_json(rows), "large": rows_json(large)},
+         lines)  # fmt: skip
 
 
 def _precision(quick: bool, out_dir: Path | None, peers: bool) -> None:

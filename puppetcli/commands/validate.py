@@ -39,6 +39,7 @@ def facts(model: Model) -> dict[str, Any]:
         },
         "h": opt.h,
         "method": opt.method,
+        "integrator": opt.integrator,
         "iterations": opt.iterations,
         "warm_start": opt.warm_start,
         "solver": solver_words(opt, two_sided_only=not (model.has_collision or model.has_limits)),

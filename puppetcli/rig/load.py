@@ -45,6 +45,7 @@ __all__ = [
 ]
 
 SOLVER_METHODS = ("auto", "pgs", "hybrid", "direct", "reference")
+INTEGRATORS = ("euler", "bdf2")
 DEFAULT_DENSITY = 1000.0  # kg/m³, water: a plausible body density
 TOP_KEYS = ("name", "gravity", "ground", "root", "friction", "solver", "defaults", "bones", "props",
             "character")  # fmt: skip
@@ -97,6 +98,7 @@ _SOLVER_READERS: dict[str, Callable[[Node], Any]] = {
     "iterations": lambda node: node.integer(1),
     "warm_start": Node.boolean,
     "warm_start_factor": lambda node: node.number(0.0, 1.0),
+    "integrator": lambda node: node.choice(INTEGRATORS),
 }
 
 

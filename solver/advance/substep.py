@@ -174,15 +174,25 @@ def pointer_at(ptr: Pointer | None, before_end: float) -> Pointer | None:
 def run_substeps(
     model: Model, state: State, inp: StepInput, n: int, step_fn: Callable
 ) -> tuple[State, StepReport]:
-    """One step of ``model`` as n steps of h/n by ``step_fn`` (same loads and grip, the
-    pointer along its mean velocity).  The State counts one step; errors name it."""
-    sub = sub_model(model, n)
-    hs = sub.options.h
-    s, reports = state, []
-    for k in range(n):
+    """One step of ``model`` as n steps of h/n by ``step_fn(n, state, input)`` (same loads
+    and grip, the pointer along its mean velocity).  The State counts one step; errors
+    name it."""
+    return run_parts(model, state, inp, (n,) * n, step_fn)
+
+
+def run_parts(
+    model: Model, state: State, inp: StepInput, parts: tuple[int, ...], step_fn: Callable
+) -> tuple[State, StepReport]:
+    """One step of ``model`` as steps of h/d for each d of ``parts`` (their sum of 1/d is
+    1), each by ``step_fn(d, state, input)`` on ``sub_model(model, d)`` (the pointer along
+    its mean velocity to each part's end); the report as ``StepReport.substeps`` says."""
+    h = model.options.h
+    s, reports, done = state, [], 0.0
+    for k, d in enumerate(parts):
         s = s if k == 0 else replace(s, step=state.step)
-        part = replace(inp, pointer=pointer_at(inp.pointer, (n - 1 - k) * hs))
-        s, rep = step_fn(sub, s, part)
+        done += h / d
+        part = replace(inp, pointer=pointer_at(inp.pointer, max(h - done, 0.0)))
+        s, rep = step_fn(d, s, part)
         reports.append(rep)
     last = reports[-1]
     report = replace(
@@ -192,6 +202,6 @@ def run_substeps(
         grip_force=np.mean([r.grip_force for r in reports], axis=0),
         grip_torque=np.mean([r.grip_torque for r in reports], axis=0),
         touch_force=np.mean([r.touch_force for r in reports], axis=0),
-        substeps=n,
+        substeps=len(parts),
     )
     return replace(s, time=state.time + model.options.h, step=state.step + 1), report

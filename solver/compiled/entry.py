@@ -49,7 +49,9 @@ def _with_warm(prev, keys, lam):
     """The step's st (layout.StepState): prev's fields (τ is not read) with the warm keys
     and λ."""
     return StepState(prev.x, prev.q, prev.v, prev.omega, prev.q_sf, prev.yielded, prev.anchor,
-                     prev.torque_avg, keys, lam, prev.asleep, prev.still)  # fmt: skip
+                     prev.torque_avg, keys, lam, prev.asleep, prev.still, prev.prev_x,
+                     prev.prev_q, prev.prev_v, prev.prev_omega, prev.prev_q_sf,
+                     prev.hist)  # fmt: skip
 
 
 @kernel(error_model="numpy", _nrt=False)

@@ -24,16 +24,26 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import replace
+from functools import partial
 
 import numpy as np
 
-from solver.advance.substep import run_substeps
+from solver.advance.bdf2 import RESTART as RESTART_PARTS
+from solver.advance.substep import run_parts, run_substeps
 from solver.compiled.entry import fast_kernel
-from solver.compiled.layout import Coupling, Input, Pointer, ReportFloat, ReportInt, StateSet
+from solver.compiled.layout import (
+    Coupling,
+    Input,
+    IOpt,
+    Pointer,
+    ReportFloat,
+    ReportInt,
+    StateSet,
+)
 from solver.compiled.pack import FastModel
 from solver.pipeline import step
 from solver.rows.grip_kernel import MODE_GRIP, MODE_NONE, MODE_TOUCH
-from solver.solve.dispatch_kernel import SUBSTEP
+from solver.solve.dispatch_kernel import RESTART, SUBSTEP
 from solver.state import State, StepInput, StepReport
 
 __all__ = ["fast_step", "supports"]
@@ -96,8 +106,23 @@ def _state_arrays(fm: FastModel, state: State) -> tuple | None:
     if any(a is None for a in (*arrays, *sleep, *warm)):
         return None
     # τ is not read: q_sf, of its type, stands in
-    prev = _new_tuple(StateSet, (*arrays, arrays[4], *sleep))
+    prev = _new_tuple(StateSet, (*arrays, arrays[4], *sleep, *history_arrays(fm, state)))
     return prev, *warm
+
+
+def history_arrays(fm: FastModel, state: State) -> tuple:
+    """The kernel's StateSet history (prev_x … prev_q_sf, hist (prev_h, prev_mark, prev_load)) of
+    ``state``: fm's zeros (read as "no history") when it has none or is not of this
+    model."""
+    nb, nj = len(fm.m.body_mass), len(fm.m.joint_parent)
+    if state.prev_h > 0.0:
+        shapes = ((nb, 3), (nb, 4), (nb, 3), (nb, 3), (nj, 3))
+        values = (state.prev_pos, state.prev_quat, state.prev_vel, state.prev_omega,
+                  state.prev_q_sf)  # fmt: skip
+        arrays = tuple(_arr(v, _F8, shape) for v, shape in zip(values, shapes, strict=True))
+        if all(a is not None for a in arrays):
+            return (*arrays, np.array([state.prev_h, state.prev_mark, state.prev_load]))
+    return fm.no_history
 
 
 def _input_arrays(fm: FastModel, inp: StepInput) -> tuple | None:
@@ -167,8 +192,14 @@ def new_state_arrays(nb: int, nj: int) -> tuple:
     """An uninitialised layout.StateSet for the kernel's out."""
     e = np.empty
     arrays = (e((nb, 3)), e((nb, 4)), e((nb, 3)), e((nb, 3)), e((nj, 3)), e(nj, _B1),
-              e((nj, 4)), e(nj), e((nj, 3)), e(nb, _B1), e(nb))  # fmt: skip
+              e((nj, 4)), e(nj), e((nj, 3)), e(nb, _B1), e(nb), e((nb, 3)), e((nb, 4)),
+              e((nb, 3)), e((nb, 3)), e((nj, 3)), e(3))  # fmt: skip
     return _new_tuple(StateSet, arrays)
+
+
+def _part(fm: FastModel, d: int, state: State, inp: StepInput) -> tuple[State, StepReport]:
+    """A step h/d of fm's model (a part of a step: solver.advance.substep.run_parts)."""
+    return fast_step(fm.sub(d), state, inp)
 
 
 def fast_step(
@@ -191,12 +222,13 @@ def fast_step(
     status, warm_key, warm_lam = _KERNEL[0](fm.flat, prev, keys, lam, ins, out, fm.rep_i, rep_f)
     if status == SUBSTEP:
         n = int(fm.rep_i[ReportInt.rows])  # the substeps asked for
-        sub = fm.sub(n)
-        return run_substeps(model, state, inp, n, lambda _m, s, part: fast_step(sub, s, part))
+        return run_substeps(model, state, inp, n, partial(_part, fm))
+    if status == RESTART:
+        return run_parts(model, state, inp, RESTART_PARTS, partial(_part, fm))
     if status:
         return step(model, state, inp)
     time, steps = state.time + model.options.h, state.step + 1
-    new = _successor(state, time, steps, out, warm_key, warm_lam)
+    new = _successor(state, time, steps, out, warm_key, warm_lam, bool(fm.iopt[IOpt.bdf2]))
     fm.last = (new, (out, warm_key, warm_lam))
     return new, kernel_report(fm.rep_i, rep_f)
 
@@ -209,7 +241,10 @@ FIELDS = (
 """State's fields after time and step, in their order: the kernel's out (x … τ), warm,
 then the kernel's sleep arrays."""
 STATE_SET_FIELDS = tuple(f for f in FIELDS if f not in ("warm_key", "warm_lam"))
-"""The State fields of a layout.StateSet's arrays, in its order."""
+"""The State fields of a layout.StateSet's arrays before its history, in its order."""
+HISTORY_FIELDS = ("prev_pos", "prev_quat", "prev_vel", "prev_omega", "prev_q_sf")
+"""The State fields of a layout.StateSet's history arrays (then hist: prev_h, prev_mark,
+prev_load)."""
 
 
 def _direct(cls, names: tuple) -> tuple | None:
@@ -240,9 +275,11 @@ _REPORT_FIELDS = ("rows", "contacts", "iterations", "residual", "solver", "grip_
 _DIRECT_REPORT = _direct(StepReport, _REPORT_FIELDS) == ()
 
 
-def _successor(state: State, time: float, steps: int, out: StateSet, keys, lam) -> State:
-    """The State after ``state``: time, steps, the kernel's out, warm keys and λ
-    (a subclass of State keeps its other fields, as ``replace`` does)."""
+def _successor(state: State, time: float, steps: int, out: StateSet, keys, lam,
+               history: bool) -> State:  # fmt: skip
+    """The State after ``state``: time, steps, the kernel's out, warm keys and λ, and
+    out's history when ``history`` (BDF2; else the defaults: none) (a subclass of State
+    keeps its other fields, as ``replace`` does)."""
     if type(state) is State and _STATE_REST is not None:
         new = _NEW(State)
         values = new.__dict__
@@ -254,11 +291,23 @@ def _successor(state: State, time: float, steps: int, out: StateSet, keys, lam) 
         )  # fmt: skip
         for name, default in _STATE_REST:  # fields the kernel does not produce
             values[name] = default()
+        if history:
+            values.update(history_fields(out))
         return new
-    arrays = dict(zip(STATE_SET_FIELDS, out, strict=True)) | {"warm_key": keys, "warm_lam": lam}
+    arrays = dict(zip(STATE_SET_FIELDS, out, strict=False)) | {"warm_key": keys, "warm_lam": lam}
+    if history:
+        arrays |= history_fields(out)
     if type(state) is State:
         return State(time=time, step=steps, **arrays)
     return replace(state, time=time, step=steps, **arrays)
+
+
+def history_fields(out: StateSet) -> dict:
+    """The State's history fields of a StateSet's (solver.advance.bdf2)."""
+    arrays = (out.prev_x, out.prev_q, out.prev_v, out.prev_omega, out.prev_q_sf)
+    return dict(zip(HISTORY_FIELDS, arrays, strict=True)) | dict(
+        prev_h=float(out.hist[0]), prev_mark=float(out.hist[1]), prev_load=float(out.hist[2])
+    )
 
 
 def kernel_report(rep_i: np.ndarray, rep_f: np.ndarray) -> StepReport:

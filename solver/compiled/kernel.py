@@ -13,13 +13,19 @@ Packed arguments (see ``solver.compiled.pack``): m model arrays, g geometry, tre
 elimination forest, ws/pws workspaces, opt/iopt options, st state arrays, inp input.
 Status FALLBACK hands the step back to the numpy implementation (box–box contact, a
 monitor failure that must raise, a degenerate direct system); SUBSTEP asks for
-rep_i[ReportInt.rows] equal substeps (solver.advance.substep) before anything is computed.
+rep_i[ReportInt.rows] equal substeps (solver.advance.substep) before anything is computed,
+RESTART for a BDF2 step without history in solver.advance.bdf2.RESTART's parts.
+
+Under ``integrator: bdf2`` the same pipeline runs as the BDF2 stage (solver.advance.bdf2):
+from the predicted end pose (``_stage``), with opt's h = γ, the rows' velocity shift
+(solver.rows.shift_kernel), the stage's integration, and the history written into out.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from solver.advance.bdf2_kernel import integrate_stage, load_mark, predict, ratio, remember
 from solver.advance.integrate_kernel import free_velocity, integrate
 from solver.advance.monitor_kernel import gaps_within, state_ok
 from solver.advance.rheology_kernel import rheology_update
@@ -38,6 +44,7 @@ from solver.compiled.layout import (
     Joints,
     LimitScratch,
     Opt,
+    Prediction,
     ReportFloat,
     ReportInt,
     Rheology,
@@ -46,6 +53,7 @@ from solver.compiled.layout import (
     SolverIndex,
     SolverScratch,
     SolverValues,
+    StepState,
     WakeScratch,
 )  # fmt: skip
 from solver.compiled.views import packed_view
@@ -54,9 +62,20 @@ from solver.kin_kernel import frames
 from solver.rows.build_kernel import build_rows
 from solver.rows.grip_kernel import MODE_TOUCH, is_touch_row
 from solver.rows.joints_kernel import limit_arrays
+from solver.rows.shift_kernel import shift_rows
 from solver.rows.table import KIND_GRIP
-from solver.solve.dispatch_kernel import FALLBACK, OK, SUBSTEP, regularize, solve, warm_table
+from solver.solve.dispatch_kernel import (
+    FALLBACK,
+    OK,
+    RESTART,
+    SUBSTEP,
+    regularize,
+    solve,
+    warm_table,
+)
 from solver.solve.hybrid_kernel import NU_CAP
+
+_OPT_SIZE = int(Opt.SIZE)
 
 
 @kernel(error_model="numpy", _nrt=False)
@@ -111,12 +130,14 @@ def step_arrays(nb, nj, rows, nodes):
                      np.empty(rows), np.empty(rows), np.empty(rows)),
         np.empty((nb, 6)), np.empty((nb, 6)), np.empty(NU_CAP * NU_CAP),
     )  # fmt: skip
+    pred = Prediction(np.empty((nb, 3)), np.empty((nb, 4)), np.empty((nb, 3)), np.empty((nb, 3)),
+                      np.empty((nb, 6)), np.empty((nj, 3)))  # fmt: skip
     scratch = Scratch(
         np.empty((nb, 6)), np.empty(nb, b), np.empty(nb, b),
         WakeScratch(np.empty(nb, b), np.empty(4)), np.empty(rows), np.empty(rows),
         np.empty((nb, 6)), IntegrateScratch(np.empty((nb, 3)), np.empty((nb, 3)), np.empty(nb, b)),
         np.empty((nj, 3)), LimitScratch(np.empty((nj, 3)), np.empty((nj, 3))), np.empty(nj, b),
-        solvers,
+        solvers, pred, np.empty((nb, 6)), np.empty(_OPT_SIZE),
     )  # fmt: skip
     return scratch, np.empty(rows, np.int64), np.empty(rows)
 
@@ -153,9 +174,21 @@ def _step(flat, st, inp, out, rep_i, rep_f, scratch, keys, values):
     if nsub > 1:
         rep_i[ReportInt.rows] = nsub
         return SUBSTEP, 0
-    frames(quat, m.body_inertia, m.body_inv_inertia, rot, inertia_w, inv_i)
+    # The stage: the paper's step from st, or BDF2's from the predicted end pose.
+    bdf, pred = iopt[IOpt.bdf2], scratch.pred
+    stage, sopt, load = st, opt, 0.0
+    if bdf:
+        ivec = inp.flags
+        load = load_mark(inp.force, inp.torque, ivec[Flags.has_force], ivec[Flags.has_torque],
+                         ivec[Flags.mode], ivec[Flags.body], inp.coupling)  # fmt: skip
+        r = ratio(opt, st, st.hist, load)
+        if r == 0.0 and iopt[IOpt.max_substeps] > 1:
+            return RESTART, 0  # solver.advance.bdf2.RESTART's parts
+        stage, sopt = _stage(m, opt, st, r, pred, rot, scratch.stage_opt)
+    frames(stage.q, m.body_inertia, m.body_inv_inertia, rot, inertia_w, inv_i)
     touch = inp.flags[Flags.mode] == MODE_TOUCH
-    if iopt[IOpt.has_collision] or touch or iopt[IOpt.sleep]:
+    shapes_needed = iopt[IOpt.has_collision] or touch
+    if shapes_needed or iopt[IOpt.sleep]:
         world_shapes(g, pos, quat, ws.shape_centre, ws.shape_rot)
     asleep = out.asleep
     shapes = (g.shape_body, g.shape_bound, g.pair_first, g.pair_second)
@@ -166,33 +199,53 @@ def _step(flat, st, inp, out, rep_i, rep_f, scratch, keys, values):
         awake[b] = movable[b] > 0.0 and not asleep[b]
     t = tick(prof, on, 0, t)
     loads = (inp.force, inp.torque, inp.flags)
-    free_velocity(m.body_inv_mass, opt, st.v, st.omega, inv_i, loads, vel_free)
+    free_velocity(m.body_inv_mass, sopt, stage.v, stage.omega, inv_i, loads, vel_free)
     for b in range(nb):
         if asleep[b]:
             vel_free[b, :] = 0.0
+            pred.shift[b, :] = 0.0
+    moving = vel_free
+    if bdf:
+        moving = scratch.moving
+        for b in range(nb):
+            for k in range(6):
+                moving[b, k] = vel_free[b, k] + pred.shift[b, k]
+        if shapes_needed:
+            world_shapes(g, stage.x, stage.q, ws.shape_centre, ws.shape_rot)
     t = tick(prof, on, 1, t)
     joint_part = prof[2]
     n, ncontact, grip0, ngrip = build_rows(
-        joints, rheo, limit_arrays(m), g, opt, iopt, st, rot, vel_free, inp, ws, asleep, awake,
+        joints, rheo, limit_arrays(m), g, sopt, iopt, stage, rot, moving, inp, ws, asleep, awake,
         scratch.limit,
     )  # fmt: skip
     if n < 0:
         return FALLBACK, 0
+    if bdf:
+        flowing_joints(m.joint_rheology, m.joint_plastic, m.joint_finite_yield, st.yielded,
+                       scratch.flows)  # fmt: skip
+        shift_rows(rw, n, pred.shift, m.joint_df, scratch.flows, inp.coupling)
     t = tick(prof, on, 3, t + (prof[2] - joint_part))  # build_rows timed its joint rows (2)
-    regularize(rw, n, m.body_inv_mass, inv_i, opt[Opt.h], opt[Opt.regularization])
+    regularize(rw, n, m.body_inv_mass, inv_i, sopt[Opt.h], opt[Opt.regularization])
     t = tick(prof, on, 4, t)
     grip = (grip0, ngrip, inp.flags[Flags.body])
     bw = Bodies(m.joint_bone, m.body_mass, m.body_inv_mass, ws.resp_a, ws.resp_b, inv_i,
                 inertia_w)  # fmt: skip
     status, iters, residual, used = solve(
-        bw, packed.tree, rw, opt, iopt, (st.warm_key, st.warm_lam), n, vel_free, grip, asleep,
+        bw, packed.tree, rw, sopt, iopt, (st.warm_key, st.warm_lam), n, vel_free, grip, asleep,
         sv, lam0, lam, vel,
     )  # fmt: skip
     t = tick(prof, on, 5, t)
-    if status or not state_ok(joints, opt, pos, quat, vel[:, :3], vel[:, 3:], False):
+    if status:
         return FALLBACK, 0
-    integrate(m.body_inertia, m.body_inv_inertia, opt[Opt.h], pos, quat, vel, rot, asleep, out.x,
-              out.q, out.omega, scratch.integrate)  # fmt: skip
+    if bdf:
+        integrate_stage(m.body_inertia, m.body_inv_inertia, sopt[Opt.h], pred, vel, rot, asleep,
+                        out.x, out.q, out.omega)  # fmt: skip
+        _keep_asleep(asleep, pos, quat, out.x, out.q, out.omega)
+    if not state_ok(joints, opt, pos, quat, vel[:, :3], vel[:, 3:], False):
+        return FALLBACK, 0
+    if not bdf:
+        integrate(m.body_inertia, m.body_inv_inertia, opt[Opt.h], pos, quat, vel, rot, asleep,
+                  out.x, out.q, out.omega, scratch.integrate)  # fmt: skip
     projected = needs_projection(joints, out.x, out.q, asleep)
     if projected and not project(m, joints, packed.ptree, packed.pws, out.x, out.q, asleep):
         return FALLBACK, 0
@@ -203,9 +256,9 @@ def _step(flat, st, inp, out, rep_i, rep_f, scratch, keys, values):
         for k in range(3):
             out.v[b, k] = vel[b, k]
     t = tick(prof, on, 6, t)
-    prev = (st.q_sf, st.yielded, st.anchor, st.torque_avg)
+    prev = (stage.q_sf, st.yielded, st.anchor, st.torque_avg)
     new = (out.q_sf, out.yielded, out.anchor, out.torque_avg, out.torque)
-    rheology_update(rheo, opt, prev, rw, n, lam, vel, ws.rheo_joint, out.q, asleep, new,
+    rheology_update(rheo, sopt, prev, rw, n, lam, vel, ws.rheo_joint, out.q, asleep, new,
                     scratch.w)  # fmt: skip
     if iopt[IOpt.sleep]:
         flowing_joints(m.joint_rheology, m.joint_plastic, m.joint_finite_yield, out.yielded,
@@ -213,6 +266,8 @@ def _step(flat, st, inp, out, rep_i, rep_f, scratch, keys, values):
         settle(m.body_island, asleep, out.still, out.v, out.omega, m.joint_bone, scratch.flows,
                opt[Opt.h], opt[Opt.sleep_speed], opt[Opt.sleep_spin], opt[Opt.sleep_time],
                fresh)  # fmt: skip
+    if bdf:
+        remember(opt[Opt.h], load, st, out, st.yielded)
     count = warm_table(rw, n, lam, keys, values)
     rep_i[ReportInt.rows], rep_i[ReportInt.contacts] = count, ncontact
     rep_i[ReportInt.iterations], rep_i[ReportInt.solver] = iters, used
@@ -220,6 +275,35 @@ def _step(flat, st, inp, out, rep_i, rep_f, scratch, keys, values):
     report(rw, n, lam, rep_f)
     tick(prof, on, 7, t)
     return OK, count
+
+
+@kernel(error_model="numpy", _nrt=False)
+def _stage(m, opt, st, r, pred, rot, stage_opt):
+    """(the stage's StepState, its opt) of a BDF2 step from st at step ratio r
+    (solver.advance.bdf2): pred (layout.Prediction) and stage_opt (opt with h = γ and the
+    yield filter's time constant scaled by γ/h) are written; rot (nb,3,3) scratch."""
+    history = (st.prev_x, st.prev_q, st.prev_v, st.prev_omega, st.prev_q_sf)
+    h = opt[Opt.h]
+    gamma = predict(m.body_inertia, m.body_inv_inertia, h, r, st, history, rot, pred)
+    for k in range(len(opt)):
+        stage_opt[k] = opt[k]
+    stage_opt[Opt.h] = gamma
+    stage_opt[Opt.yield_filter_time] = opt[Opt.yield_filter_time] * gamma / h
+    stage = StepState(pred.x, pred.q, pred.v, pred.omega, pred.q_sf, st.yielded, st.anchor,
+                      st.torque_avg, st.warm_key, st.warm_lam, st.asleep, st.still, st.prev_x,
+                      st.prev_q, st.prev_v, st.prev_omega, st.prev_q_sf, st.hist)  # fmt: skip
+    return stage, stage_opt
+
+
+@kernel(error_model="numpy", _nrt=False)
+def _keep_asleep(asleep, pos, quat, out_pos, out_quat, out_omega):
+    """Sleeping bodies keep their pose, at rest."""
+    for b in range(len(pos)):
+        if asleep[b]:
+            for k in range(3):
+                out_pos[b, k], out_omega[b, k] = pos[b, k], 0.0
+            for k in range(4):
+                out_quat[b, k] = quat[b, k]
 
 
 @kernel(error_model="numpy")

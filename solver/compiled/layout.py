@@ -143,6 +143,7 @@ Opt = offsets("Opt", [
 
 IOpt = offsets("IOpt", [
     ("method", 1),  # pack.METHODS
+    ("bdf2", 1),  # integrator: bdf2
     ("iterations", 1), ("warm_start", 1), ("has_rheology", 1), ("has_limits", 1),
     ("has_collision", 1), ("max_substeps", 1), ("profiling", 1), ("cull_pairs", 1),
     ("dormant_rows", 1), ("sleep", 1),
@@ -155,12 +156,17 @@ StateSet = structure("StateSet", ("out", "prev"), [
     ("x", "f3"), ("q", "f4"), ("v", "f3"), ("omega", "f3"), ("q_sf", "f3"),
     ("yielded", "b"), ("anchor", "f4"), ("torque_avg", "f"), ("torque", "f3"),
     ("asleep", "b"), ("still", "f"),
+    ("prev_x", "f3"), ("prev_q", "f4"), ("prev_v", "f3"), ("prev_omega", "f3"),
+    ("prev_q_sf", "f3"), ("hist", "f"),
 ])  # fmt: skip
-"""A step's new state (out; a Sim's two sets, one read, one written; prev, a previous out)."""
+"""A step's new state (out; a Sim's two sets, one read, one written; prev, a previous out).
+prev_* and hist (3,: prev_h, prev_mark, prev_load): the history of the BDF2 step
+(State.prev_*), written only under ``integrator: bdf2``."""
 
 StepState = namedtuple("StepState", [
     "x", "q", "v", "omega", "q_sf", "yielded", "anchor", "torque_avg", "warm_key",
-    "warm_lam", "asleep", "still",
+    "warm_lam", "asleep", "still", "prev_x", "prev_q", "prev_v", "prev_omega", "prev_q_sf",
+    "hist",
 ], module=__name__)  # fmt: skip
 StepState.NAMES = ("st",)
 """The state a step reads (st): a StateSet's fields but τ, with the warm keys and λ."""
@@ -220,12 +226,18 @@ IntegrateScratch = structure("IntegrateScratch", ("integrate_scratch",), [
     ("rates", "f3"), ("moms", "f3"), ("done", "b"),
 ])  # fmt: skip
 LimitScratch = structure("LimitScratch", ("limit_scratch",), [("gaps", "f3"), ("turned", "f3")])
+Prediction = structure("Prediction", ("pred",), [  # solver.advance.bdf2.Prediction
+    ("x", "f3"), ("q", "f4"), ("v", "f3"), ("omega", "f3"), ("shift", "f6"), ("q_sf", "f3"),
+])  # fmt: skip
+"""The stage (x̃, q̃, its start velocities v̂ − ṽ and ω̂ − ω̃, the shift ṽ, ω̃, and q̂_sf)."""
 
 Scratch = structure("Scratch", ("scratch",), [
     ("vel_free", "f6"), ("fresh", "b"), ("awake", "b"), ("wake", WakeScratch),
     ("lam0", "f"), ("lam", "f"), ("vel", "f6"), ("integrate", IntegrateScratch),
     ("w", "f3"),  # rheology's
     ("limit", LimitScratch), ("flows", "b"), ("solvers", SolverScratch),
+    ("pred", Prediction), ("moving", "f6"),  # the BDF2 stage's
+    ("stage_opt", "f"),  # Opt.SIZE: opt with the stage's h and yield filter time
 ])  # fmt: skip
 """The arrays kernel._step works in: whatever they hold on entry is overwritten first."""
 
@@ -272,8 +284,8 @@ world inertias."""
 STRUCTURES = (
     ModelArrays, Geometry, TreeWork, Tree, ProjectionTree, Rows, Contacts, Workspace,
     ProjectionWorkspace, Packed, StateSet, StepState, Input, SolverFlags, SolverIndex,
-    SolverValues, SolverScratch, WakeScratch, IntegrateScratch, LimitScratch, Scratch, Warm,
-    StepWork, SimArrays, Joints, Rheology, Limits, Bodies,
+    SolverValues, SolverScratch, WakeScratch, IntegrateScratch, LimitScratch, Prediction,
+    Scratch, Warm, StepWork, SimArrays, Joints, Rheology, Limits, Bodies,
 )  # fmt: skip
 VECTORS = {"opt": Opt, "iopt": IOpt, "pvec": Pointer, "cvec": Coupling, "ivec": Flags,
            "rep_i": ReportInt, "rep_f": ReportFloat}  # fmt: skip

@@ -46,6 +46,7 @@ from solver.model import Model
 from solver.rows.joints_kernel import limit_thresholds
 
 METHODS = {"auto": 0, "pgs": 1, "direct": 2, "hybrid": 3}
+INTEGRATORS = ("euler", "bdf2")
 FEATURES = (2, 8, 3, 3, 16)  # most contacts per pair of each group
 BOX_BOX = 4
 _GROUP = {(0, 1): 0, (0, 2): 1, (1, 1): 2, (1, 2): 3, (2, 2): BOX_BOX}
@@ -76,11 +77,15 @@ class FastModel:
     coupling: tuple = (None, None, None)  # (Coupling packed last, its array, its flags)
     pointer: tuple = ()
     subs: dict = field(default_factory=dict)  # n → the FastModel of the step at h/n
+    no_history: tuple = ()  # a StateSet's history arrays of a state without one (zeros)
 
     def __post_init__(self) -> None:
         p, at = self.pvec, Pointer
         self.pointer = (p[at.pos : at.quat], p[at.quat : at.vel], p[at.vel : at.omega],
                         p[at.omega : at.radius])  # fmt: skip
+        nb, nj = len(self.zeros), len(self.m.joint_parent)
+        z = np.zeros
+        self.no_history = (z((nb, 3)), z((nb, 4)), z((nb, 3)), z((nb, 3)), z((nj, 3)), z(3))
 
     m = property(lambda self: self.packed.m)
     g = property(lambda self: self.packed.g)
@@ -148,6 +153,7 @@ def pack(model: Model) -> FastModel:
             opt[at : at + np.size(getattr(o, entry))] = getattr(o, entry)
     iopt = np.zeros(IOpt.SIZE, np.int64)
     iopt[IOpt.method] = METHODS.get(o.method, -1)
+    iopt[IOpt.bdf2] = o.integrator == "bdf2"
     iopt[IOpt.has_rheology] = bool(model.joint_rheology.any())
     iopt[IOpt.has_limits], iopt[IOpt.has_collision] = model.has_limits, model.has_collision
     options = ("iterations", "warm_start", "max_substeps", "cull_pairs", "dormant_rows", "sleep")
@@ -155,6 +161,8 @@ def pack(model: Model) -> FastModel:
         iopt[IOpt[entry]] = getattr(o, entry)
     if o.method not in METHODS:
         reason = f"solver method '{o.method}' is not compiled"
+    if o.integrator not in INTEGRATORS:
+        reason = f"integrator '{o.integrator}' is not compiled"
     nrows = 9 * nj + 3 * ncontact + 6
     ns = len(model.geometry.shape_body)
     ws = Workspace(

@@ -37,11 +37,14 @@ from solver.compiled.fast import (
     _input_arrays,
     entry_point,
     fast_step,
+    history_arrays,
+    history_fields,
     kernel_report,
 )  # fmt: skip
 from solver.compiled.flat import flatten
 from solver.compiled.kernel import step_arrays
 from solver.compiled.layout import (
+    IOpt,
     Pointer,
     ReportFloat,
     ReportInt,
@@ -75,9 +78,13 @@ class Sim:
         self._fm = fm
         rest, nb, rows = initial_state(model), len(fm.zeros), len(fm.ws.rows.body_a)
         sets = [
-            StateSet(*(np.zeros_like(_field(rest, f, nb)) for f in STATE_SET_FIELDS))
+            StateSet(
+                *(np.zeros_like(_field(rest, f, nb)) for f in STATE_SET_FIELDS),
+                *(np.zeros_like(a) for a in fm.no_history),
+            )
             for _ in range(2)
         ]
+        self._history = bool(fm.iopt[IOpt.bdf2])
         warm = Warm(np.zeros(rows, np.int64), np.zeros(rows), np.zeros(1, np.int64))
         work = StepWork(*step_arrays(nb, len(fm.m.joint_parent), rows, len(fm.tree.parent)))
         arrays = SimArrays(fm.packed, *sets, warm, np.zeros(ReportInt.SIZE, np.int64),
@@ -90,7 +97,8 @@ class Sim:
     def load(self, state: State) -> None:
         """Make ``state`` the current state (copied)."""
         nb, nj = len(self._fm.zeros), len(self._fm.m.joint_parent)
-        current = tuple(_field(state, f, nb) for f in STATE_SET_FIELDS)
+        current = (*(_field(state, f, nb) for f in STATE_SET_FIELDS),
+                   *history_arrays(self._fm, state))  # fmt: skip
         if [a.shape for a in current] != [a.shape for a in self._sets[0]]:  # the step trusts these
             raise ValueError(f"Sim.load: not a state of this model ({nb} bodies, {nj} joints)")
         keys, lam, count = self._warm.keys, self._warm.lam, self._warm.n
@@ -109,7 +117,10 @@ class Sim:
         """The current state, as a State of its own arrays."""
         n = int(self._warm.n[0])
         current = self._sets[self._phase]
-        arrays = {f: a.copy() for f, a in zip(STATE_SET_FIELDS, current, strict=True)}
+        arrays = {f: a.copy() for f, a in zip(STATE_SET_FIELDS, current, strict=False)}
+        if self._history:
+            arrays |= {f: a.copy() if isinstance(a, np.ndarray) else a
+                       for f, a in history_fields(current).items()}  # fmt: skip
         return State(
             time=self.time, step=self.steps, warm_key=self._warm.keys[:n].copy(),
             warm_lam=self._warm.lam[:n].copy(), **arrays,
@@ -119,7 +130,10 @@ class Sim:
         """The current state over this stepper's own arrays, not copied: for reading
         before the next step (which overwrites them); ``state`` is the copy to keep."""
         n = int(self._warm.n[0])
-        arrays = dict(zip(STATE_SET_FIELDS, self._sets[self._phase], strict=True))
+        current = self._sets[self._phase]
+        arrays = dict(zip(STATE_SET_FIELDS, current, strict=False))
+        if self._history:
+            arrays |= history_fields(current)
         return State(
             time=self.time, step=self.steps, warm_key=self._warm.keys[:n],
             warm_lam=self._warm.lam[:n], **arrays,

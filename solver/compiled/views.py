@@ -11,6 +11,7 @@ from solver.compiled.layout import (
     LimitScratch,
     ModelArrays,
     Packed,
+    Prediction,
     ProjectionTree,
     ProjectionWorkspace,
     Rows,
@@ -251,6 +252,12 @@ def state_set_view(flat, k):
         leaf_f3(flat, k + 8),  # torque
         leaf_b(flat, k + 9),  # asleep
         leaf_f(flat, k + 10),  # still
+        leaf_f3(flat, k + 11),  # prev_x
+        leaf_f4(flat, k + 12),  # prev_q
+        leaf_f3(flat, k + 13),  # prev_v
+        leaf_f3(flat, k + 14),  # prev_omega
+        leaf_f3(flat, k + 15),  # prev_q_sf
+        leaf_f(flat, k + 16),  # hist
     )
 
 
@@ -327,6 +334,18 @@ def limit_scratch_view(flat, k):
 
 
 @kernel(inline="always")
+def prediction_view(flat, k):
+    return Prediction(
+        leaf_f3(flat, k + 0),  # x
+        leaf_f4(flat, k + 1),  # q
+        leaf_f3(flat, k + 2),  # v
+        leaf_f3(flat, k + 3),  # omega
+        leaf_f6(flat, k + 4),  # shift
+        leaf_f3(flat, k + 5),  # q_sf
+    )
+
+
+@kernel(inline="always")
 def scratch_view(flat, k):
     return Scratch(
         leaf_f6(flat, k + 0),  # vel_free
@@ -341,6 +360,9 @@ def scratch_view(flat, k):
         limit_scratch_view(flat, k + 12),  # limit
         leaf_b(flat, k + 14),  # flows
         solver_scratch_view(flat, k + 15),  # solvers
+        prediction_view(flat, k + 35),  # pred
+        leaf_f6(flat, k + 41),  # moving
+        leaf_f(flat, k + 42),  # stage_opt
     )
 
 
@@ -357,8 +379,8 @@ def warm_view(flat, k):
 def step_work_view(flat, k):
     return StepWork(
         scratch_view(flat, k + 0),  # scratch
-        leaf_i(flat, k + 35),  # keys
-        leaf_f(flat, k + 36),  # lam
+        leaf_i(flat, k + 43),  # keys
+        leaf_f(flat, k + 44),  # lam
     )
 
 
@@ -367,9 +389,9 @@ def sim_arrays_view(flat, k):
     return SimArrays(
         packed_view(flat, k + 0),  # packed
         state_set_view(flat, k + 106),  # set0
-        state_set_view(flat, k + 117),  # set1
-        warm_view(flat, k + 128),  # warm
-        leaf_i(flat, k + 131),  # rep_i
-        leaf_f(flat, k + 132),  # rep_f
-        step_work_view(flat, k + 133),  # work
+        state_set_view(flat, k + 123),  # set1
+        warm_view(flat, k + 140),  # warm
+        leaf_i(flat, k + 143),  # rep_i
+        leaf_f(flat, k + 144),  # rep_f
+        step_work_view(flat, k + 145),  # work
     )

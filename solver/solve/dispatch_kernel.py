@@ -178,4 +178,4 @@ def warm_table(rw, n, lam, keys, values):
     return count
 
 
-OK, FALLBACK, SUBSTEP = 0, 1, 2
+OK, FALLBACK, SUBSTEP, RESTART = 0, 1, 2, 3

@@ -8,7 +8,7 @@ import dataclasses
 import numpy as np
 
 import solver.compiled.fast as fast
-from solver.compiled.fast import FIELDS, SOLVER_NAMES, _successor, kernel_report
+from solver.compiled.fast import FIELDS, HISTORY_FIELDS, SOLVER_NAMES, _successor, kernel_report
 from solver.compiled.layout import ReportFloat, StateSet
 from solver.state import State, StepReport
 
@@ -34,12 +34,21 @@ def test_kernel_fields_are_state_fields():
     assert fast._STATE_REST is not None and fast._DIRECT_REPORT
 
 
+def _history() -> tuple:
+    """A StateSet's history arrays (prev_x … prev_q_sf, hist) of distinct values."""
+    return (*(np.full(2, 20.0 + k) for k in range(5)), np.array([0.005, 1.5, 2.5]))
+
+
 def test_states_and_reports_are_the_constructors():
     arrays = tuple(np.full(k + 1, float(k)) for k in range(len(FIELDS)))
-    out = StateSet(*arrays[:9], *arrays[11:])  # State's order: x … τ, warm keys and λ, sleep
-    got = _successor(State(0.0, 0, *arrays), 0.5, 3, out, *arrays[9:11])
+    # State's order: x … τ, warm keys and λ, sleep; then the StateSet's history
+    out = StateSet(*arrays[:9], *arrays[11:], *_history())
+    got = _successor(State(0.0, 0, *arrays), 0.5, 3, out, *arrays[9:11], False)
     assert same(got, State(0.5, 3, *arrays))
     assert dataclasses.replace(got, step=4).step == 4
+    got = _successor(State(0.0, 0, *arrays), 0.5, 3, out, *arrays[9:11], True)
+    prev = dict(zip(HISTORY_FIELDS, _history(), strict=False))
+    assert same(got, State(0.5, 3, *arrays, **prev, prev_h=0.005, prev_mark=1.5, prev_load=2.5))
     rep_f, at = np.arange(10.0), ReportFloat
     got = kernel_report(np.array([108, 2, 15, 1]), rep_f)
     force, torque = rep_f[at.grip_force : at.grip_torque], rep_f[at.grip_torque : at.touch_force]
@@ -53,6 +62,6 @@ def test_a_state_subclass_keeps_its_fields():
         tag: str = ""
 
     arrays = tuple(np.full(2, float(k)) for k in range(len(FIELDS)))
-    out = StateSet(*arrays[:9], *arrays[11:])
-    got = _successor(Tagged(0.0, 0, *arrays, tag="a"), 0.5, 1, out, *arrays[9:11])
+    out = StateSet(*arrays[:9], *arrays[11:], *_history())
+    got = _successor(Tagged(0.0, 0, *arrays, tag="a"), 0.5, 1, out, *arrays[9:11], False)
     assert type(got) is Tagged and got.tag == "a" and got.time == 0.5

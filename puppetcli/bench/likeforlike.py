@@ -1,0 +1,426 @@
+"""Accuracy at equal time against MuJoCo, on the same continuous physics (``puppetcli bench
+--accuracy``).
+
+Both engines get the same bodies, inertias and ball joints with the same Voigt springs
+(``plastic: false``: K_f and D_f about the rest pose, equal on the three axes, no limits,
+no contacts), so they approximate the same ODE; the truth is that ODE integrated to 1e-12
+by DOP853 in joint coordinates (``puppetcli.bench.truth``), independent of both.  Scenes:
+
+- ``chain-bent``: 5 links of rigs/chain.yaml (10 cm, 0.2 kg; K = 0.5 N·m/rad,
+  D = 0.005 N·m·s/rad) released from a 3-D bend under gravity;
+- ``chain-hanging``: 4 such links hanging straight down from the fixed root, released
+  (their springs' rest is the horizontal T-pose);
+- ``doll-bent``: rigs/doll.yaml's bones and joints (its K_f, D_f) released from a bent
+  pose under gravity, no input;
+- ``doll-pull``: the same doll at rest, its left hand (forearm_l's tail) pulled 0.21 m
+  over 0.5 s along a minimum-jerk path by a 2,000 N/m, 40 N·s/m spring-damper.  Both
+  engines get the pointer's pose and velocity at the end of each step.
+
+The error is the RMS (and the largest) distance of every bone's tail from the truth's at
+t = 0.04, 0.08, … 1 s; the time is the wall time of the stepping loop per simulated
+second (ours: the in-place compiled stepper, solver.compiled.sim.Sim; MuJoCo: mj_step),
+the best of ``repeats`` runs.  ``equal_time`` reads off each engine's time to reach an
+error level by log-log interpolation between its steps.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import math
+import os
+import tempfile
+import time
+from dataclasses import dataclass, replace
+from functools import cache
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from puppetcli.bench import mjcf
+from puppetcli.bench import truth as ode
+from puppetcli.bench.peers import quiet
+from puppetcli.rig.load import load_rig
+from puppetcli.spidar.pointer import min_jerk
+from solver.engine import Engine
+from solver.model import Model, build_model
+from solver.observe import points_on_bones
+from solver.rows.grip import Coupling, Pointer
+from solver.spec import LimitSpec, RheologySpec
+from solver.state import State, StepInput, initial_state
+
+from .scenes import RIGS
+
+SCENES = ("chain-bent", "chain-hanging", "doll-bent", "doll-pull")
+DURATION, SAMPLE = 1.0, 0.04  # s: every step below divides SAMPLE
+STEPS = (0.0005, 0.001, 0.002, 0.004, 0.005, 0.01, 0.02, 0.04)
+LARGE_STEPS = (0.05, 0.1, 0.2, 0.25)
+OURS = ("bdf2", "euler")
+PEERS = ("Euler", "implicitfast", "RK4")
+PULL = dict(bone="forearm_l", delta=np.array([0.0, 0.15, 0.15]), duration=0.5,
+            stiffness=2000.0, damping=40.0)  # fmt: skip
+CHAIN_K, CHAIN_D = 0.5, 0.005
+BEND_SEED = 3
+
+
+def voigt_model(rig: str, links: int | None = None, k: float | None = None,
+                d: float | None = None) -> Model:  # fmt: skip
+    """A rig with spring-damper joints only: K_f and D_f (their axes' mean, or k and d)
+    equal on all axes, no series damper, limits, ground, props or collisions; the first
+    ``links`` + 1 bones when given."""
+    spec = load_rig(RIGS / rig)
+    bones = spec.bones if links is None else spec.bones[: links + 1]
+    out = []
+    for b in bones:
+        if b.rheology is None:  # the fixed root
+            out.append(replace(b, collide=False))
+            continue
+        kf = float(np.mean(b.rheology.kf)) if k is None else k
+        df = float(np.mean(b.rheology.df)) if d is None else d
+        rheology = RheologySpec(np.full(3, kf), np.full(3, df), np.full(3, math.inf))
+        out.append(replace(b, rheology=rheology, limits=LimitSpec(), collide=False))
+    return build_model(replace(spec, bones=tuple(out), ground=None, props=()))
+
+
+def posed(model: Model, rotvecs: np.ndarray) -> State:
+    """The rest state with every joint turned by its rotation vector (parent frame, rad)
+    and the bodies placed by the joints (at rest: the springs' deflection)."""
+    tree = ode.make_tree(model)
+    q = Rotation.from_rotvec(rotvecs[: len(tree.joint)]).as_quat(scalar_first=True)
+    kin = ode.kinematics(tree, q, np.zeros((len(tree.joint), 3)))
+    state = initial_state(model)
+    q_sf = np.zeros((model.njoint, 3))
+    q_sf[tree.joint] = rotvecs[: len(tree.joint)]
+    body_q = Rotation.from_matrix(kin.rot).as_quat(scalar_first=True)
+    return replace(state, body_pos=kin.pos, body_quat=body_q, joint_q_sf=q_sf)
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A like-for-like scene: the model (its options' h is set per run), the start, and
+    the pull (None: no input)."""
+
+    name: str
+    model: Model
+    start: State
+    pull: ode.Pull | None
+
+
+def _bend(n: int, scale: float) -> np.ndarray:
+    return np.random.default_rng(BEND_SEED).normal(size=(n, 3)) * scale
+
+
+@cache
+def scene(name: str) -> Scene:
+    """The scene ``name`` (module docstring)."""
+    if name.startswith("chain"):
+        links = 5 if name == "chain-bent" else 4
+        model = voigt_model("chain.yaml", links, CHAIN_K, CHAIN_D)
+        if name == "chain-bent":
+            turns = _bend(links, 0.4)
+        else:
+            turns = np.zeros((links, 3))
+            turns[0, 2] = -math.pi / 2  # straight down
+        return Scene(name, model, posed(model, turns), None)
+    model = voigt_model("doll.yaml")
+    if name == "doll-bent":
+        return Scene(name, model, posed(model, _bend(model.njoint, 0.3)), None)
+    if name == "doll-pull":
+        return Scene(name, model, initial_state(model), _pull(model))
+    raise ValueError(f"unknown scene {name!r}")
+
+
+def _pull(model: Model) -> ode.Pull:
+    b = model.bone_names.index(PULL["bone"])
+    tail = model.bone_tail0[b]
+    delta, duration = PULL["delta"], PULL["duration"]
+
+    def target(t: float) -> tuple[np.ndarray, np.ndarray]:
+        tau = min(max(t / duration, 0.0), 1.0)
+        rate = 30.0 * tau**2 * (1.0 - tau) ** 2 / duration  # d(min_jerk)/dt
+        return tail + delta * min_jerk(tau), delta * rate
+
+    return ode.Pull(b, tail - model.body_pos0[b], PULL["stiffness"], PULL["damping"], target)
+
+
+@dataclass(frozen=True)
+class Samples:
+    """When a run is compared with the truth: every ``every`` s until ``until`` s."""
+
+    every: float = SAMPLE
+    until: float = DURATION
+
+    def times(self) -> np.ndarray:
+        return np.arange(1, round(self.until / self.every) + 1) * self.every
+
+
+SMALL, LARGE = Samples(), Samples(1.0, 2.0)
+"""The study's samples (steps up to 40 ms), and the large steps' (50–250 ms)."""
+
+
+@cache
+def true_tails(name: str, samples: Samples = SMALL) -> np.ndarray:
+    """(ntimes, nbone, 3) the bones' tails at the sample times by the truth; kept in
+    ``truth_cache()`` under a hash of the scene's model, start, samples and the truth's
+    source (the doll's takes ~4 minutes)."""
+    sc = scene(name)
+    key = _truth_key(sc, samples)
+    path = truth_cache() / f"{name}-{key}.npy"
+    if path.exists():
+        return np.load(path)
+    tree = ode.make_tree(sc.model)
+    y0 = ode.joint_state(tree, sc.start.body_quat, sc.start.body_omega)
+    ys = ode.integrate(tree, y0, samples.times(), sc.pull)
+    pos, q = ode.body_poses(tree, ys)
+    tails = points_on_bones(sc.model, pos, q, sc.model.bone_tail0)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with tempfile.NamedTemporaryFile(dir=path.parent, suffix=".npy", delete=False) as f:
+        np.save(f, tails)
+    os.replace(f.name, path)
+    return tails
+
+
+def truth_cache() -> Path:
+    """Where computed truths are kept: $PUPPETCLI_CACHE or ~/.cache/puppetcli, /truth."""
+    base = os.environ.get("PUPPETCLI_CACHE") or Path.home() / ".cache" / "puppetcli"
+    return Path(base) / "truth"
+
+
+def _truth_key(sc: Scene, samples: Samples) -> str:
+    digest = hashlib.sha256()
+    m = sc.model
+    arrays = (m.body_mass, m.body_inertia, m.body_pos0, m.joint_parent, m.joint_bone,
+              m.joint_anchor_parent, m.joint_anchor_child, m.joint_kf, m.joint_df,
+              m.options.gravity, sc.start.body_pos, sc.start.body_quat,
+              samples.times())  # fmt: skip
+    for a in arrays:
+        digest.update(np.ascontiguousarray(a).tobytes())
+    digest.update(Path(ode.__file__).read_bytes())
+    digest.update(repr(PULL if sc.pull else None).encode())
+    return digest.hexdigest()[:16]
+
+
+def _coupling(sc: Scene) -> Coupling:
+    p = sc.pull
+    return Coupling(
+        p.body, p.point, np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0]), p.stiffness, p.damping,
+        0.0, 0.0, math.inf, math.inf, position_only=True,
+    )  # fmt: skip
+
+
+def our_inputs(sc: Scene, h: float, steps: int) -> list[StepInput | None]:
+    """Each step's input: the pointer's pose and velocity at the step's end."""
+    if sc.pull is None:
+        return [None] * steps
+    coupling, ident = _coupling(sc), np.array([1.0, 0.0, 0.0, 0.0])
+    out = []
+    for k in range(1, steps + 1):
+        pos, vel = sc.pull.target(k * h)
+        out.append(StepInput(pointer=Pointer(pos, ident, vel, np.zeros(3)), coupling=coupling))
+    return out
+
+
+@dataclass(frozen=True)
+class Run:
+    """One engine's run of a scene at one step: errors (m), seconds of stepping per
+    simulated second, and a note (empty, or why it has no result)."""
+
+    scene: str
+    engine: str
+    h: float
+    rms: float
+    worst: float
+    cost: float
+    note: str = ""
+
+
+def _errors(tails: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
+    d = np.linalg.norm(tails - truth, axis=-1)
+    if not np.all(np.isfinite(d)):
+        return math.inf, math.inf
+    return float(np.sqrt(np.mean(d**2))), float(d.max())
+
+
+def run_ours(
+    name: str, integrator: str, h: float, repeats: int = 3, samples: Samples = SMALL
+) -> Run:
+    """Our compiled stepper on scene ``name`` at step h with ``integrator``."""
+    sc = scene(name)
+    model = sc.model.with_options(h=h, integrator=integrator)
+    steps, every = round(samples.until / h), round(samples.every / h)
+    inputs = our_inputs(sc, h, steps)
+    engine, best, tails = Engine(model), math.inf, []
+    for _ in range(repeats):
+        sim, tails, wall = engine.stepper(sc.start), [], 0.0
+        try:
+            start = time.perf_counter()
+            for k in range(steps):
+                sim.advance(inputs[k])
+                if (k + 1) % every == 0:  # reading the result is not simulating
+                    wall += time.perf_counter() - start
+                    s = sim.view()
+                    tails.append(points_on_bones(model, s.body_pos, s.body_quat, model.bone_tail0))
+                    start = time.perf_counter()
+        except Exception as exc:  # a SimulationError: the step has no answer
+            return Run(name, integrator, h, math.inf, math.inf, math.inf, str(exc).split(":")[0])
+        best = min(best, wall)
+    rms, worst = _errors(np.array(tails), true_tails(name, samples))
+    return Run(name, integrator, h, rms, worst, best / samples.until)
+
+
+def _peer(sc: Scene, h: float, integrator: str) -> mjcf.Peer:
+    """MuJoCo's model of the scene at step h, at the scene's start."""
+    mujoco = mjcf.import_mujoco()
+    grip = None
+    if sc.pull is not None:
+        p = sc.pull
+        start, _ = p.target(0.0)
+        grip = mjcf.PeerGrip(p.body, p.point, start, p.stiffness, p.damping)
+    peer = mjcf.build_peer(sc.model, h, integrator, grip)
+    m, d, model = peer.mj_model, peer.mj_data, sc.model
+    for j in range(model.njoint):
+        adr = m.jnt_qposadr[m.joint(model.joint_names[j]).id]
+        parent = sc.start.body_quat[model.joint_parent[j]]
+        rel = Rotation.from_quat(parent, scalar_first=True).inv() * Rotation.from_quat(
+            sc.start.body_quat[model.joint_bone[j]], scalar_first=True
+        )
+        d.qpos[adr : adr + 4] = rel.as_quat(scalar_first=True)
+    mujoco.mj_forward(m, d)
+    return peer
+
+
+def run_peer(
+    name: str, integrator: str, h: float, repeats: int = 3, samples: Samples = SMALL
+) -> Run:
+    """MuJoCo (``integrator``) on scene ``name`` at step h."""
+    mujoco = mjcf.import_mujoco()
+    sc = scene(name)
+    steps, every = round(samples.until / h), round(samples.every / h)
+    mocap = ctrl = None
+    if sc.pull is not None:
+        ends = [sc.pull.target(k * h) for k in range(1, steps + 1)]
+        mocap = np.array([p for p, _ in ends])
+        ctrl = np.array([u for _, u in ends]) * (sc.pull.damping / sc.pull.stiffness)
+    best, tails = math.inf, []
+    for _ in range(repeats):
+        peer = _peer(sc, h, integrator)
+        m, d, tails, wall = peer.mj_model, peer.mj_data, [], 0.0
+        with quiet(mujoco):
+            start = time.perf_counter()
+            for k in range(steps):
+                if mocap is not None:
+                    d.mocap_pos[0] = mocap[k]
+                    d.ctrl[:] = ctrl[k]
+                mujoco.mj_step(m, d)
+                if (k + 1) % every == 0:
+                    wall += time.perf_counter() - start
+                    tails.append(mjcf.peer_tails(peer))
+                    start = time.perf_counter()
+        best = min(best, wall)
+    rms, worst = _errors(np.array(tails), true_tails(name, samples))
+    note = "" if math.isfinite(rms) and rms < 1.0 else "diverged"
+    return Run(name, f"MuJoCo {integrator}", h, rms, worst, best / samples.until, note)
+
+
+def study(names=SCENES, steps=STEPS, peers: bool = True, repeats: int = 3) -> list[Run]:
+    """Every engine on every scene at every step (MuJoCo's only with ``peers``)."""
+    runs = []
+    for name in names:
+        for h in steps:
+            runs += [run_ours(name, integrator, h, repeats) for integrator in OURS]
+            if peers:
+                runs += [run_peer(name, integrator, h, repeats) for integrator in PEERS]
+    return runs
+
+
+def large_steps(names=SCENES, steps=LARGE_STEPS) -> list[Run]:
+    """Ours at the large steps (errors at t = 1 and 2 s)."""
+    return [run_ours(n, i, h, 2, LARGE) for n in names for h in steps for i in OURS]
+
+
+LEVELS = (3e-3, 1e-3, 3e-4, 1e-4)
+"""The error levels (m) the equal-time table reads each engine's cost at."""
+
+
+def cost_at(runs: list[Run], level: float) -> float:
+    """Seconds per simulated second an engine's runs (one scene, its steps) need for an
+    RMS error of at most ``level``: the cheapest of its runs that reach it and of the
+    log-log interpolations between consecutive steps whose errors straddle it; inf if
+    none reaches it."""
+    ok = sorted((r for r in runs if math.isfinite(r.rms) and r.rms > 0), key=lambda r: r.h)
+    best = min((r.cost for r in ok if r.rms <= level), default=math.inf)
+    for small, large in itertools.pairwise(ok):
+        lo, hi = sorted((small.rms, large.rms))
+        if not lo < level < hi:
+            continue
+        f = math.log(level / small.rms) / math.log(large.rms / small.rms)
+        best = min(best, math.exp(math.log(small.cost) + f * math.log(large.cost / small.cost)))
+    return best
+
+
+@dataclass(frozen=True)
+class EqualTime:
+    """At one error level on one scene: each engine's cost (s per simulated s) and ours
+    (bdf2) ÷ the cheapest MuJoCo integrator's."""
+
+    scene: str
+    level: float
+    costs: dict
+    ratio: float
+
+
+def equal_time(runs: list[Run], levels=LEVELS) -> list[EqualTime]:
+    out = []
+    for name in dict.fromkeys(r.scene for r in runs):
+        engines = dict.fromkeys(r.engine for r in runs if r.scene == name)
+        for level in levels:
+            costs = {e: cost_at([r for r in runs if r.scene == name and r.engine == e], level)
+                     for e in engines}  # fmt: skip
+            peers = [c for e, c in costs.items() if e.startswith("MuJoCo")]
+            ratio = costs["bdf2"] / min(peers) if peers and min(peers) < math.inf else math.nan
+            out.append(EqualTime(name, level, costs, ratio))
+    return out
+
+
+def format_runs(runs: list[Run]) -> str:
+    """RMS error (mm) and cost (ms per simulated s) per scene, step and engine."""
+    engines = list(dict.fromkeys(r.engine for r in runs))
+    lines = ["RMS tail error, mm / stepping time, ms per simulated second"]
+    for name in dict.fromkeys(r.scene for r in runs):
+        lines += ["", f"{name}:", "h ms     " + "".join(f"{e:>26}" for e in engines)]
+        for h in sorted({r.h for r in runs if r.scene == name}):
+            cells = []
+            for e in engines:
+                got = [r for r in runs if r.scene == name and r.engine == e and r.h == h]
+                cells.append(f"{_cell(got[0]) if got else '':>26}")
+            lines.append(f"{h * 1e3:<9g}" + "".join(cells))
+    return "\n".join(lines)
+
+
+def _cell(r: Run) -> str:
+    if not math.isfinite(r.rms) or r.note:
+        return r.note or "no answer"
+    return f"{r.rms * 1e3:.3g} / {r.cost * 1e3:.3g}"
+
+
+def format_equal_time(table: list[EqualTime]) -> str:
+    """Each engine's cost at each error level, and ours ÷ MuJoCo's best."""
+    if not table:
+        return ""
+    engines = list(table[0].costs)
+    names = "".join(f"{e:>20}" for e in engines)
+    head = f"scene          error mm{names}   bdf2 ÷ best MuJoCo"
+    lines = ["ms per simulated second to reach an RMS error", head]
+    for r in table:
+        cells = "".join(f"{c * 1e3:>20.3g}" if math.isfinite(c) else f"{'-':>20}"
+                        for c in r.costs.values())  # fmt: skip
+        lines.append(f"{r.scene:<15}{r.level * 1e3:<9g}{cells}   {r.ratio:.2f}")
+    return "\n".join(lines)
+
+
+def csv_text(runs: list[Run]) -> str:
+    lines = ["scene,engine,h_s,rms_m,max_m,seconds_per_simulated_second,note"]
+    lines += [f"{r.scene},{r.engine},{r.h!r},{r.rms!r},{r.worst!r},{r.cost!r},{r.note}"
+              for r in runs]  # fmt: skip
+    return "\n".join(lines) + "\n"
