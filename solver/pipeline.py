@@ -30,9 +30,8 @@ from solver.errors import SimulationError
 from solver.model import Model
 from solver.rows.build import build_rows
 from solver.rows.grip import coupling_wrench
-from solver.rows.joints import (
-    flowing,
-)
+from solver.rows.joints import flowing
+from solver.rows.pin import with_pins
 from solver.rows.table import KEY_SHIFT, KIND_CONTACT, KIND_FRICTION, Rows
 from solver.solve.dispatch import solve
 from solver.solve.response import regularize, row_response, world_inverse_inertia
@@ -97,10 +96,11 @@ def _step_once(
         **rheo,
     )
     grip_force, grip_torque = coupling_wrench(rows, lam)
-    return new, StepReport(
+    report = StepReport(
         len(rows), ncontact, iters, float(residual), used, grip_force, grip_torque,
         touch_force(rows, lam),
     )  # fmt: skip
+    return new, with_pins(report, inp.pins, new)
 
 
 def touch_force(rows: Rows, lam: np.ndarray) -> np.ndarray:
