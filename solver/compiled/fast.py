@@ -40,8 +40,8 @@ from solver.compiled.layout import (
 )
 from solver.compiled.pack import FastModel
 from solver.pipeline import step
-from solver.rows.pin import with_pins
 from solver.rows.grip_kernel import MODE_GRIP, MODE_NONE, MODE_TOUCH
+from solver.rows.pin import with_pins
 from solver.solve.dispatch_kernel import SUBSTEP
 from solver.state import NO_PINS, NO_SLIP, State, StepInput, StepReport
 

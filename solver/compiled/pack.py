@@ -4,8 +4,8 @@
 geometry, forest and workspaces as the named structures of ``solver.compiled.layout``
 (``Packed``), the options as two small arrays with named offsets (``Opt``, ``IOpt``), and
 preallocated row/contact workspaces sized for the worst case (6 rows per joint, 3 limit
-rows per joint, 3 rows per possible contact, the grip's 6 and 6 per bone for pins).  The workspaces make a
-FastModel usable by one thread at a time.
+rows per joint, 3 rows per possible contact, the grip's 6 and 6 per bone for pins).  The
+workspaces make a FastModel usable by one thread at a time.
 
 Every array of those structures is a view into a few buffers, ``flat``
 (solver.compiled.flat): the compiled step is passed the buffers and rebuilds the

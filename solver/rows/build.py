@@ -9,13 +9,13 @@ from solver.collide.pointer import pointer_contacts
 from solver.model import Model
 from solver.rows.contacts import contact_rows
 from solver.rows.grip import coupling_rows
-from solver.rows.pin import pin_rows
 from solver.rows.joints import (
     anchor_rows,
     joint_frames,
     limit_rows,
     rheology_rows,
 )
+from solver.rows.pin import pin_rows
 from solver.rows.table import KIND_RHEOLOGY, Rows, concat, take_rows
 from solver.state import State, StepInput
 

@@ -4,8 +4,19 @@ from __future__ import annotations
 
 from solver.compiled.layout import PinVec
 from solver.jit import kernel
-from solver.kin_kernel import add, matvec, qconj, qlog, qmul, quat_at, quat_from, scale, sub, vec
-from solver.kin_kernel import vec_from
+from solver.kin_kernel import (
+    add,
+    matvec,
+    qconj,
+    qlog,
+    qmul,
+    quat_at,
+    quat_from,
+    scale,
+    sub,
+    vec,
+    vec_from,
+)
 from solver.rows.joints_kernel import arc_offset
 from solver.rows.pin import SLOTS
 from solver.rows.table import KIND_PIN
