@@ -31,6 +31,7 @@ class PinMessages:
 
     def __init__(self, model: Model, source: str) -> None:
         self.model, self.source = model, source
+        self.started = False  # the run has pinned: its trace has the pin channels
         self._slipping: set[int] = set()  # bones whose pin slipped last step
 
     def slips(self, t: float, inp: StepInput, report: StepReport) -> list[tuple]:
