@@ -85,11 +85,11 @@ def measure_pins(h: float = 0.001, seconds: float = 0.5, repeats: int = 5) -> li
     rows = []
     for count in runs:
         reports, drift = last[count]
-        solvers = sorted({r.solver for r in reports})
-        rows.append(PinRow(
-            count, n / best[count], best[0] / best[count], float(np.mean([r.rows for r in reports])),
-            float(np.mean([r.iterations for r in reports])), "+".join(solvers), drift,
-        ))  # fmt: skip
+        solvers = "+".join(sorted({r.solver for r in reports}))
+        rows_mean = float(np.mean([r.rows for r in reports]))
+        sweeps = float(np.mean([r.iterations for r in reports]))
+        rows.append(PinRow(count, n / best[count], best[0] / best[count], rows_mean, sweeps,
+                           solvers, drift))  # fmt: skip
     return rows
 
 
