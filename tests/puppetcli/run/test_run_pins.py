@@ -8,11 +8,15 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
+import yaml
 from click.testing import CliRunner
+from mcap.reader import make_reader
 from scipy.spatial.transform import Rotation
 
 from puppetcli.cli import cli
 from puppetcli.mcap.trace import read_trace
+from puppetcli.run.pin_trace import CHANNELS as PIN_CHANNELS
 
 ROOT = Path(__file__).resolve().parents[3]
 DOLL = ROOT / "rigs" / "doll.yaml"
@@ -122,3 +126,25 @@ def test_a_whole_bone_pin_on_a_free_root_gives_the_keys_of_a_fixed_root(tmp_path
     # measured 8.6e-9 (m and quaternion units): the pin rows' 1e-6 regularisation lets
     # the 10 kg hips give by micrometres under the arm's pull
     assert worst < 4.5e-8
+
+
+def test_a_pinned_point_is_the_scripts_point_on_the_bone(tmp_path):
+    # pinned at t = 0, the doll is in its rest pose: the target is the hand's head (the
+    # rig's numbers) plus the script's point, world-aligned at rest
+    script = "actions:\n  - pin: {bone: hand_l, point: [0.05, 0.01, -0.005]}\n  - wait: 0.01\n"
+    _, trace = pose(tmp_path, script + "  - key: end\n")
+    (pin,) = trace["/puppet/pin_force"][0][1]["pins"]
+    hand = next(b for b in yaml.safe_load(DOLL.read_text())["bones"] if b["name"] == "hand_l")
+    expected = np.add(hand["head"], [0.05, 0.01, -0.005])
+    assert np.max(np.abs(np.array(pin["target"]) - expected)) < 1e-15  # measured 0
+
+
+def test_the_pin_channels_follow_their_schemas(tmp_path):
+    jsonschema = pytest.importorskip("jsonschema")
+    pose(tmp_path, SLIP)
+    seen = set()
+    with open(tmp_path / "out" / "trace.mcap", "rb") as f:
+        for schema, channel, message in make_reader(f).iter_messages(topics=list(PIN_CHANNELS)):
+            jsonschema.validate(json.loads(message.data), json.loads(schema.data))
+            seen.add(channel.topic)
+    assert seen == set(PIN_CHANNELS)

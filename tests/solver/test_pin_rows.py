@@ -142,3 +142,17 @@ def test_unpinning_gives_no_kick_the_free_chain_falls_by_gravity_alone():
     assert np.max(np.abs(gained - expected)) < 1.5e-16  # measured 2.8e-17 kg·m/s (1 ulp)
     # no body jumps: measured 0.075 m/s, the links unbending as they start to fall (g·h = 0.049)
     assert np.max(np.abs(after.body_vel - state.body_vel)) < 2 * 9.81 * H
+
+
+def test_the_in_place_stepper_reports_the_pins_as_the_step_does():
+    model = build_model(chain(3, H, root_mode="free", rheo=rheology(5.0, 0.5, np.inf)))
+    state = initial_state(model)
+    pins = (make_pin(state, 0, orient=True), make_pin(state, 2, force_limit=4.0))
+    engine, sim = Engine(model), Engine(model).stepper(state)
+    for _ in range(50):
+        state, report = engine.step(state, StepInput(pins=pins))
+        kept = sim.step(StepInput(pins=pins))
+        for name in ("pin_force", "pin_torque", "pin_slip"):
+            assert np.array_equal(getattr(report, name), getattr(kept, name)), name
+    assert np.array_equal(sim.state.body_pos, state.body_pos)
+    assert report.pin_slip[1] and not report.pin_slip[0]  # the tip's 4 N gives
