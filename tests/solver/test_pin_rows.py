@@ -33,7 +33,8 @@ def held_chain(steps: int):
     """A free 3-link chain (elastic joints) whose first link is pinned whole at its head,
     its last link's tail gripped towards a pointer 1.7 m away: every grip row sits at its
     limit, so the grip's force is known, GRIP_LIMIT on each axis.  Returns (model, state,
-    report, pin, coupling, the pinned point's largest distance from its target)."""
+    report, pin, coupling, the pinned point's largest distance from its target, the
+    engine that stepped it)."""
     model = build_model(chain(3, H, root_mode="free", rheo=rheology(5.0, 0.5, np.inf)))
     engine, state = Engine(model), initial_state(model)
     pin = make_pin(state, 0, model.bone_head0[0] - model.body_pos0[0], orient=True)
@@ -49,11 +50,11 @@ def held_chain(steps: int):
     for _ in range(steps):
         state, report = engine.step(state, inp)
         drift = max(drift, float(np.linalg.norm(pinned_point(state, pin) - pin.target)))
-    return model, state, report, pin, grip, drift
+    return model, state, report, pin, grip, drift, engine
 
 
 def test_a_pinned_point_holds_and_carries_the_chains_weight_and_the_grips_pull():
-    model, state, report, pin, grip, drift = held_chain(800)
+    model, state, report, pin, grip, drift, _ = held_chain(800)
     # the chain swings up towards the pointer and settles while the pin holds
     assert drift < 2.5e-6  # measured 5.3e-7 m over the 4 s
     assert np.max(np.abs(state.body_vel)) < 1e-10  # at rest: a static balance holds
@@ -133,8 +134,7 @@ def test_a_whole_bone_pin_on_a_free_root_is_a_fixed_root():
 
 
 def test_unpinning_gives_no_kick_the_free_chain_falls_by_gravity_alone():
-    model, state, _report, _pin, _grip, _ = held_chain(800)
-    engine = Engine(model)
+    model, state, _report, _pin, _grip, _, engine = held_chain(800)  # the same engine after
     momentum = model.body_mass @ state.body_vel
     after, _ = engine.step(state)  # unpinned and released at once
     gained = model.body_mass @ after.body_vel - momentum
