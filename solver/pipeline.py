@@ -32,9 +32,8 @@ from solver.errors import SimulationError
 from solver.model import Model
 from solver.rows.build import build_rows
 from solver.rows.grip import coupling_wrench
-from solver.rows.joints import (
-    flowing,
-)
+from solver.rows.joints import flowing
+from solver.rows.pin import with_pins
 from solver.rows.shift import shifted, velocity_share
 from solver.rows.table import KEY_SHIFT, KIND_CONTACT, KIND_FRICTION, Rows
 from solver.solve.dispatch import solve
@@ -123,10 +122,11 @@ def _step_once(
         **(bdf2.history(state, h, load, now, kept) if bdf else {}),
     )
     grip_force, grip_torque = coupling_wrench(rows, lam)
-    return new, StepReport(
+    report = StepReport(
         len(rows), ncontact, iters, float(residual), used, grip_force, grip_torque,
         touch_force(rows, lam),
     )  # fmt: skip
+    return new, with_pins(report, inp.pins, new)
 
 
 def touch_force(rows: Rows, lam: np.ndarray) -> np.ndarray:

@@ -71,13 +71,15 @@ class StepInput:
     body's centre of mass.  ``None`` = no external load.
     pointer: the haptic pointer (solver.rows.grip.Pointer) or None; coupling: the grip
     (solver.rows.grip.Coupling) or None.  Without a coupling, a pointer with a radius
-    touches the bones (free mode).
+    touches the bones (free mode).  pins: a tuple of solver.rows.pin.Pin, at most one per
+    bone (empty: none, and no cost).
     """
 
     body_force: np.ndarray | None = None
     body_torque: np.ndarray | None = None
     pointer: Any = None
     coupling: Any = None
+    pins: tuple = ()
 
 
 @dataclass(frozen=True)
@@ -90,6 +92,9 @@ class StepReport:
     substeps: how many equal substeps the step took (solver.advance.substep); with more than
     one, rows and contacts are the last substep's, iterations their sum, the residual
     their worst and the wrenches their mean.
+    pin_force (npin,3) N, pin_torque (npin,3) N·m: the wrench each of the input's pins put
+    on its bone (force at the pinned point; with substeps, the last substep's); pin_slip
+    (npin,) bool: a row of the pin reached its limit (solver.rows.pin.retarget).
     """
 
     rows: int
@@ -101,6 +106,15 @@ class StepReport:
     grip_torque: np.ndarray = field(default_factory=lambda: np.zeros(3))
     touch_force: np.ndarray = field(default_factory=lambda: np.zeros(3))
     substeps: int = 1
+    pin_force: np.ndarray = field(default_factory=lambda: NO_PINS)
+    pin_torque: np.ndarray = field(default_factory=lambda: NO_PINS)
+    pin_slip: np.ndarray = field(default_factory=lambda: NO_SLIP)
+
+
+NO_PINS = np.zeros((0, 3))
+NO_PINS.flags.writeable = False
+NO_SLIP = np.zeros(0, dtype=bool)
+NO_SLIP.flags.writeable = False
 
 
 def initial_state(model: Model) -> State:

@@ -93,6 +93,12 @@ SOLVER_CHOICES = [*SOLVERS, "reference"]
     help="Measure each skip of unneeded work on and off instead (puppetcli/bench/skips.py).",
 )
 @click.option(
+    "--pins",
+    is_flag=True,
+    help="Measure the cost of 0, 1 and 4 pins on the doll's grip scene instead "
+    "(puppetcli/bench/pins.py).",
+)
+@click.option(
     "--live",
     is_flag=True,
     help="Measure `puppetcli live`'s loop instead: real-time factor, headroom and "
@@ -131,6 +137,7 @@ def command(
     precision: bool,
     accuracy: bool,
     skips: bool,
+    pins: bool,
     live: bool,
     pose: bool,
     batch: bool,
@@ -153,7 +160,8 @@ def command(
 
     After the table, where a doll step's time goes, stage by stage (read from the
     processor's cycle counter inside the compiled step).  With --skips: each skip of
-    unneeded work (pair culling, dormant rows, the direct solve) on and off.
+    unneeded work (pair culling, dormant rows, the direct solve) on and off.  With
+    --pins: the grip scene with 0, 1 and 4 pins.
 
     With --accuracy: error against run time on like-for-like scenes (puppetcli/bench/
     likeforlike.py: Voigt chains and the doll, released or pulled, no contacts) for our two
@@ -187,6 +195,12 @@ def command(
 
         rows, figures = measure_batch()
         emit({"batch": rows_json(rows), **figures}, [format_batch(rows, figures)])
+        return
+    if pins:
+        from puppetcli.bench.pins import format_pins, measure_pins
+
+        rows = measure_pins(steps_h[0], seconds)
+        emit({"pins": rows_json(rows)}, [format_pins(rows, steps_h[0])])
         return
     if skips:
         from puppetcli.bench.skips import format_skips, measure_skips

@@ -124,6 +124,22 @@ def _grip(msg: dict, bones: list[str]) -> rec.Grip:
     return rec.Grip(bone, np.array(_vector(msg, "point", 3)), only)
 
 
+def _bone(msg: dict, bones: list[str]) -> str:
+    bone = msg.get("bone")
+    if bone not in bones:
+        raise Rejected(f"bone: expected a bone of the rig, got {bone!r:.40}")
+    return bone
+
+
+def _pin(msg: dict, bones: list[str]) -> rec.Pin:
+    orient = False if msg.get("orient") is None else _flag(msg, "orient")
+    return rec.Pin(_bone(msg, bones), np.array(_vector(msg, "point", 3)), orient)
+
+
+def _unpin(msg: dict, bones: list[str]) -> rec.Unpin:
+    return rec.Unpin(None if msg.get("bone") is None else _bone(msg, bones))
+
+
 _PARSERS = {
     "pointer": lambda m, b: PointerTarget(_vector(m, "pos", 3), _unit(_vector(m, "quat", 4))),
     "grip": _grip,
@@ -132,6 +148,8 @@ _PARSERS = {
     "position_only": lambda m, b: PositionOnly(_flag(m, "on")),
     "key": lambda m, b: rec.Key(_label(m)),
     "undo": lambda m, b: rec.Undo(),
+    "pin": _pin,
+    "unpin": _unpin,
     "pause": lambda m, b: Pause(_flag(m, "on")),
     "stop": lambda m, b: Stop(),
     "ping": lambda m, b: Ping(_number(m, "t", 1e15)),
@@ -211,5 +229,18 @@ def frame(live: rec.LiveRecording, clock: RealTimeClock, seq: int, ack: int, rej
             "requested_force": _floats(tap.requested[0]),
             "requested_torque": _floats(tap.requested[1]),
         },
-        "stats": stats, "ack": ack,
+        "pins": _pins(live), "stats": stats, "ack": ack,
     }  # fmt: skip
+
+
+def _pins(live: rec.LiveRecording) -> list[dict]:
+    """The pins held: bone, where the point is held (m), orient, the force on the bone (N)."""
+    board, report = live.runner.board, live.tap.report
+    forces = report.pin_force if report is not None else ()
+    if len(forces) != len(board.pins):
+        forces = np.zeros((len(board.pins), 3))
+    return [
+        {"bone": name, "target": _floats(pin.target), "orient": pin.orient,
+         "force": _floats(force)}
+        for name, pin, force in zip(board.names, board.pins, forces, strict=True)
+    ]  # fmt: skip

@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from puppetcli.live.track import LiveTrack, PointerFilter, device_from_world
+from puppetcli.mcap.pin_events import pin_button
 from puppetcli.mcap.replay import EventActions, Replay, SessionRunner, session_script
 from puppetcli.mcap.session import TICK, Event, Session, SessionWriter, Workspace
 from puppetcli.run.build import compile_engine
@@ -43,7 +44,9 @@ from solver.rows.grip import nearest_point
 from solver.spec import RigSpec
 from solver.state import StepInput, StepReport
 
-__all__ = ["Grip", "Key", "LiveRecording", "Release", "Touch", "Undo", "live_settings"]
+__all__ = [
+    "Grip", "Key", "LiveRecording", "Pin", "Release", "Touch", "Undo", "Unpin", "live_settings",
+]  # fmt: skip
 
 HAPTIC_CHANNELS = {
     "/haptic/wrench": "puppetcli.HapticWrench",
@@ -85,6 +88,22 @@ class Key:
 @dataclass(frozen=True)
 class Undo:
     """Drop the last key."""
+
+
+@dataclass(frozen=True)
+class Pin:
+    """Pin ``bone`` at the world ``point`` (m), its orientation too when ``orient``."""
+
+    bone: str
+    point: np.ndarray
+    orient: bool = False
+
+
+@dataclass(frozen=True)
+class Unpin:
+    """Unpin ``bone`` (None: every bone)."""
+
+    bone: str | None = None
 
 
 def live_settings(h: float | None) -> dict:
@@ -202,7 +221,28 @@ class LiveRecording:
             self._button(t, {"button": "key", "state": "up"})
         elif isinstance(c, Undo) and len(self.runner.keys):
             self._button(t, {"button": "undo", "state": "down"})
+        elif isinstance(c, Pin | Unpin):
+            self._pin(c)
         return False
+
+    def _pin(self, c: Pin | Unpin) -> None:
+        """A pin or unpin event (nothing for a bone pinned already, or not pinned)."""
+        pinned = self.runner.board.names
+        if isinstance(c, Unpin):
+            if pinned and (c.bone is None or c.bone in pinned):
+                self._button(self.time, pin_button(c.bone, False))
+            return
+        if c.bone in pinned:
+            return
+        local = self._rest_offset(self.model.bone_names.index(c.bone), np.asarray(c.point, float))
+        self._button(self.time, pin_button(c.bone, True, local, c.orient))
+
+    def _rest_offset(self, b: int, point: np.ndarray) -> np.ndarray:
+        """The world ``point`` carried by bone b, as an offset from its head in its rest
+        pose (how sessions store grip and pin points)."""
+        state = self.runner.state
+        anchor = quat.rotate(quat.conj(state.body_quat[b]), point - state.body_pos[b])
+        return self.model.body_pos0[b] + anchor - self.model.bone_head0[b]
 
     def _grip(self, c: Grip) -> bool:
         m, state = self.model, self.runner.state
@@ -212,8 +252,7 @@ class LiveRecording:
                 raise NothingInReach(m.bone_names[b], dist)
         else:
             b, point = m.bone_names.index(c.bone), np.asarray(c.point, float)
-        anchor = quat.rotate(quat.conj(state.body_quat[b]), point - state.body_pos[b])
-        local = m.body_pos0[b] + anchor - m.bone_head0[b]
+        local = self._rest_offset(b, point)
         only = self.position_only if c.position_only is None else c.position_only
         gains = GRIP_DEFAULTS | {"position_only": only}
         message = {"button": "grip", "state": "down", "bone": m.bone_names[b], "point": local,

@@ -27,10 +27,12 @@ import numpy as np
 import yaml
 
 from puppetcli.errors import ScriptError
+from puppetcli.mcap.pin_events import pin_button
 from puppetcli.mcap.session import TICK, Event, Session, Workspace
 from puppetcli.run.runner import Runner
 from puppetcli.script.actions import Expect, Grip, Move, Release, Rotate, Touch, Twist
 from puppetcli.script.load import DEFAULT_WORKSPACE_SCALE, Key, Push, Script
+from puppetcli.script.pins import Pin, Unpin
 from puppetcli.spidar import DeviceError, DevicePreset, check_reachable, counts_from_pose
 from puppetcli.spidar.pointer import Motion, still
 from solver import quat
@@ -82,6 +84,8 @@ class _Tape:
             key = {"button": "key", "state": "down", "label": action.label}
             self._button(began, key, action.line)
             self._button(began, {"button": "key", "state": "up"}, action.line)
+        elif isinstance(action, Pin | Unpin):
+            self._button(began, _pin_fields(action), action.line)
         elif isinstance(action, Push):
             fields = {"bone": action.bone, "force": action.force, "torque": action.torque}
             fields |= {"point": action.point, "duration": action.duration}
@@ -110,6 +114,14 @@ class _Tape:
         index = sum(e.topic == "/script/events" for e in self.events)
         message = {"t": t, "action": action, **fields, "line": line}
         self.events.append(Event(t, "/script/events", index, message))
+
+
+def _pin_fields(action: Pin | Unpin) -> dict:
+    """A pin or unpin action as its ``/spidar/buttons`` fields (puppetcli.mcap.pin_events)."""
+    if isinstance(action, Unpin):
+        return pin_button(action.bone, False)
+    limits = {"force_limit": action.force_limit, "torque_limit": action.torque_limit}
+    return pin_button(action.bone, True, action.point, action.orient, limits)
 
 
 def _tick_time(t: float) -> float:

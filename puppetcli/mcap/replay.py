@@ -31,6 +31,7 @@ from typing import Any
 import numpy as np
 
 from puppetcli.errors import ScriptError, SessionError, shown
+from puppetcli.mcap.pin_events import pin_action
 from puppetcli.mcap.session import Event, Session, read_session
 from puppetcli.run.runner import Runner, TouchMode, UndoKey, Until
 from puppetcli.run.trace import RunTrace
@@ -250,12 +251,14 @@ class EventActions:
 
     Buttons: grip down grips (ignored while gripping), grip up releases (ignored while
     free), key down takes a key (label or "key N"), touch down/up switches free-mode
-    touching on/off, undo down drops the last key; key up and other buttons are ignored.
+    touching on/off, undo down drops the last key, pin down/up pins and unpins
+    (puppetcli.mcap.pin_events); key up and other buttons are ignored.
     """
 
     def __init__(self, session: Session, model: Model) -> None:
         self.session, self.model = session, model
         self.gripping, self.keys = False, 0
+        self.pinned: set[str] = set()
 
     def __call__(self, event: Event) -> object | None:
         """The action of ``event`` (None when it does nothing)."""
@@ -274,6 +277,8 @@ class EventActions:
             return TouchMode(down, line)
         if button == "undo" and down:
             return UndoKey(line)
+        if button == "pin":
+            return pin_action(event, session, self.model, self.pinned)
         return None
 
 

@@ -50,8 +50,8 @@ __all__ = [
     "write_session",
 ]
 
-FORMAT_VERSION = "2"  # 2 added the touch and undo buttons (docs/sessions.md)
-FORMATS_READ = ("1", "2")
+FORMAT_VERSION = "3"  # 2 added the touch and undo buttons, 3 the pin button (docs/sessions.md)
+FORMATS_READ = ("1", "2", "3")
 METADATA_NAME = "puppetcli.mcap.session"
 TICK = 1e-3  # s: the device's servo and pose-update period
 CHANNELS = {
@@ -479,7 +479,7 @@ def _build(path: Path, meta: dict[str, str], raw: list, complete: bool) -> Sessi
 
 # --- message checks ------------------------------------------------------------------------
 
-_BUTTON_KEYS = {"bone": str, "label": str, "gains": dict, "line": int}
+_BUTTON_KEYS = {"bone": str, "label": str, "gains": dict, "line": int, "orient": bool}
 
 
 def parse_message(where: str, topic: str, data: bytes, log_ns: int, n: int) -> dict:

@@ -27,11 +27,13 @@ import numpy as np
 
 from puppetcli.errors import Interrupted, RunStopped, ScriptError
 from puppetcli.run.keyframes import KeyframeSet
+from puppetcli.run.pins import PinBoard
 from puppetcli.run.snapshot import capture, push_input
 from puppetcli.run.trace import RunTrace
 from puppetcli.script.actions import Expect, Grip, Move, Release, Rotate, Touch, Twist
 from puppetcli.script.expect import ExpectResult, check
 from puppetcli.script.load import Key, Push, Script, Wait
+from puppetcli.script.pins import Pin, Unpin
 from puppetcli.spidar.haptics import HapticChain, norm3, row_norms
 from puppetcli.spidar.pointer import Motion, pointer_path, still
 from solver import quat
@@ -126,6 +128,7 @@ class Runner:
         self.motion: Motion = still(np.asarray(script.pointer_start, dtype=float), quat.IDENTITY)
         self.pointer_on = any(isinstance(a, POINTER_ACTIONS) for a in script.actions)
         self.coupling: Coupling | None = None
+        self.board = PinBoard(model)  # pins hold through every other action until unpinned
         self.touch_enabled = True  # free-mode touching (a session's touch switch)
         self.touch_suspended = False  # after a release, until the pointer is clear of the bones
         self.reach = bone_reach(model)
@@ -198,7 +201,15 @@ class Runner:
             ),
             TouchMode: self._touch_mode,
             UndoKey: self._undo,
+            Pin: self._pin,
+            Unpin: lambda a: self.board.unpin(a.bone),
         }
+
+    def _pin(self, action: Pin) -> None:
+        self.board.pin_rest_point(
+            self.state, action.bone, action.point, orient=action.orient,
+            force_limit=action.force_limit, torque_limit=action.torque_limit,
+        )  # fmt: skip
 
     def _undo(self, action: UndoKey) -> None:
         if not len(self.keys):
@@ -312,10 +323,14 @@ class Runner:
         waiting = self.coupling is None and self.touch_enabled and self.touch_suspended
         return (
             self.batch_steps and push is None and self.trace is None and self.on_step is None
-            and not (self.pointer_on and waiting)
+            and not (self.pointer_on and waiting) and not self.board
         )  # fmt: skip
 
     def _input(self, push: Push | None, poses, k: int) -> StepInput:
+        inp = self._pointer_input(push, poses, k)
+        return replace(inp, pins=self.board.pins) if self.board else inp
+
+    def _pointer_input(self, push: Push | None, poses, k: int) -> StepInput:
         loads = push_input(self.model, self.sim.view(), push) if push is not None else None
         if poses is None:
             return loads or StepInput()
@@ -359,6 +374,8 @@ class Runner:
         self.peak_displayed = max(self.peak_displayed, float(row_norms(shown[:, :3]).max()))
 
     def _after_step(self, inp: StepInput) -> None:
+        if self.board:
+            self.board.after_step(self.sim.view(), self.sim.report)
         grip_force, grip_torque, touch_force = self.sim.wrench()
         fx, fy, fz = (grip_force if self.coupling is not None else touch_force).tolist()
         tx, ty, tz = grip_torque.tolist()

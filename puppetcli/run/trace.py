@@ -5,7 +5,8 @@ Channels added to trace.mcap's step channels (see puppetcli.mcap.trace):
 `/puppet/keyframe` (puppetcli.KeyframeEvent, when a key is taken) and
 `/puppet/pointer` (foxglove.SceneUpdate: the pointer and, in grip mode, the
 coupling line to the grip point).  Device channels exist only for scripts that
-use the pointer.  Session replays (``spidar=True``) add `/spidar/tensions`
+use the pointer.  A run's first pin adds `/puppet/pins`, `/puppet/pin_force` and `/log`
+(puppetcli.run.pin_trace).  Session replays (``spidar=True``) add `/spidar/tensions`
 (puppetcli.SpidarTensions: string tensions and the displayed wrench Aᵀt) and
 `/spidar/estimate` (puppetcli.SpidarEstimate: the estimated grip pose).
 """
@@ -26,6 +27,8 @@ from puppetcli.mcap.trace import (
     ns_from_seconds,
     scene_update,
 )
+from puppetcli.run.pin_trace import CHANNELS as PIN_CHANNELS
+from puppetcli.run.pin_trace import PinMessages
 from puppetcli.script.load import Script
 from puppetcli.spidar.pointer import device_from_world
 from solver import quat
@@ -106,6 +109,7 @@ class RunTrace:
         self.writer.add_channel(
             "/puppet/keyframe", "puppetcli.KeyframeEvent", load_schema("puppetcli.KeyframeEvent")
         )
+        self._pins = PinMessages(model, script.source)
         channels = (CHANNELS if pointer else {}) | (SPIDAR_CHANNELS if spidar else {})
         for topic, name in channels.items():
             self.writer.add_channel(topic, name, load_schema(name))
@@ -130,6 +134,9 @@ class RunTrace:
 
     def step(self, s: State, report: StepReport, inp: StepInput, coupling: Coupling | None,
              requested: tuple, displayed: tuple) -> None:  # fmt: skip
+        pinned = self._pinned(inp)
+        if pinned:
+            self._pending.extend(self._pins.slips(s.time, inp, report))
         if s.step % self.every:
             return
         device = None
@@ -143,9 +150,19 @@ class RunTrace:
                  residual=report.residual, solver=report.solver),
             device,
         ))  # fmt: skip
+        if pinned:
+            self._pending.extend(self._pins.step(s.time, inp, report))
         self._steps += 1
         if self._steps >= BATCH:
             self.flush()
+
+    def _pinned(self, inp: StepInput) -> bool:
+        """True once the run has pinned (its first pin adds the pin channels)."""
+        if inp.pins and not self._pins.started:
+            self._pins.started = True
+            for topic, name in PIN_CHANNELS.items():
+                self.writer.add_channel(topic, name, load_schema(name))
+        return self._pins.started
 
     def spidar(self, s: State, track, k: int, shown, wanted: tuple) -> None:
         """The device's side of a replayed step: estimate at tick k, tensions, Aᵀt."""

@@ -176,6 +176,8 @@ class ParseContext:
     here: Node | None = None
     grip_line: int | None = None
     grip_bone: str | None = None
+    pinned: dict[str, int] = field(default_factory=dict)  # bone → line of its pin
+    rig_bones: dict = field(default_factory=dict)  # name → solver.spec.BoneSpec
 
     def bone(self, node: Node) -> str:
         """Read a bone name that must exist in the rig."""

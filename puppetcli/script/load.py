@@ -43,6 +43,7 @@ from puppetcli.script.actions import (
     parse_touch,
     parse_twist,
 )
+from puppetcli.script.pins import Pin, Unpin, parse_pin, parse_unpin, rig_bones
 from puppetcli.yamldoc import Fields, Node, did_you_mean, load_file, load_text
 from solver.spec import RigSpec
 
@@ -53,12 +54,14 @@ __all__ = [
     "Grip",
     "Key",
     "Move",
+    "Pin",
     "Push",
     "Release",
     "Rotate",
     "Script",
     "Touch",
     "Twist",
+    "Unpin",
     "Wait",
     "load_script",
     "script_from_text",
@@ -109,7 +112,7 @@ class Key:
     line: int
 
 
-Action = Push | Wait | Key | Grip | Move | Rotate | Twist | Release | Touch | Expect
+Action = Push | Wait | Key | Grip | Move | Rotate | Twist | Release | Touch | Expect | Pin | Unpin
 
 
 @dataclass(frozen=True)
@@ -180,7 +183,8 @@ def _context(rig: RigSpec) -> ParseContext:
     joints = tuple(
         bone.name for bone in rig.bones if bone.parent is not None or rig.root_mode == "ball"
     )
-    return ParseContext(tuple(b.name for b in rig.bones), joints, root, rig.root_mode)
+    names = tuple(b.name for b in rig.bones)
+    return ParseContext(names, joints, root, rig.root_mode, rig_bones=rig_bones(rig))
 
 
 def _lowpass(node: Node) -> float:
@@ -298,4 +302,6 @@ ACTION_PARSERS: dict[str, ActionParser] = {
     "release": parse_release,
     "touch": parse_touch,
     "expect": parse_expect,
+    "pin": parse_pin,
+    "unpin": parse_unpin,
 }

@@ -114,8 +114,7 @@ def predict(inertia, inv_inertia, h, r, st, prev, rot, pred):
         vel_hat = _ahead(v, vec(pv, b), c)
         mom = _momentum(inertia, rot, b, q, w)
         mom_hat = _ahead(mom, _momentum(inertia, rot, b, quat_at(pq, b), vec(pw, b)), c)
-        v_tilde = _ahead(v, vec(pv, b), r)
-        w_tilde = _ahead(w, vec(pw, b), r)
+        v_tilde, w_tilde = v, w
         put(pred.x, b, add(pos_hat, scale(gamma, v_tilde)))
         q_end = qnormalize(qmul(qexp(scale(gamma, w_tilde)), q_hat))
         for k in range(4):

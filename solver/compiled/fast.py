@@ -35,6 +35,7 @@ from solver.compiled.layout import (
     Coupling,
     Input,
     IOpt,
+    PinVec,
     Pointer,
     ReportFloat,
     ReportInt,
@@ -43,8 +44,9 @@ from solver.compiled.layout import (
 from solver.compiled.pack import FastModel
 from solver.pipeline import step
 from solver.rows.grip_kernel import MODE_GRIP, MODE_NONE, MODE_TOUCH
+from solver.rows.pin import with_pins
 from solver.solve.dispatch_kernel import RESTART, SUBSTEP
-from solver.state import State, StepInput, StepReport
+from solver.state import NO_PINS, NO_SLIP, State, StepInput, StepReport
 
 __all__ = ["fast_step", "supports"]
 
@@ -52,6 +54,7 @@ SOLVER_NAMES = ("direct", "pgs", "hybrid")
 _F8, _I8, _B1 = np.dtype(np.float64), np.dtype(np.int64), np.dtype(np.bool_)
 _NO_VEC = np.zeros(Coupling.SIZE)  # the pointer / coupling argument when there is none (never read)
 _NO_INPUT = StepInput()  # frozen: one for every step without input
+_NO_PINS = (np.zeros((0, PinVec.SIZE)), np.zeros(0, np.int64))  # the pins of a step without
 # The report's and the pointer's offsets as plain ints and slices: an enum member costs an
 # attribute lookup each time it is read, and these are read every step.
 _RESIDUAL, _RADIUS = int(ReportFloat.residual), int(Pointer.radius)
@@ -158,7 +161,31 @@ def _input_arrays(fm: FastModel, inp: StepInput) -> tuple | None:
     flags = (mode, body, position_only, *loads)
     if flags != fm.flags:  # comparing costs a tenth of writing
         fm.ivec[:], fm.flags = flags, flags
-    return _new_tuple(Input, (force, torque, pvec, cvec, fm.ivec))
+    pins = _NO_PINS if not inp.pins else _pin_arrays(fm, inp.pins, nb)
+    if pins is None:
+        return None
+    return _new_tuple(Input, (force, torque, pvec, cvec, fm.ivec, *pins))
+
+
+def _pin_arrays(fm: FastModel, pins: tuple, nb: int) -> tuple | None:
+    """(layout.PinVec rows, bones) of ``pins``, packed once per tuple of pins (a caller
+    keeps its tuple while its pins do not change); None for pins the numpy step must judge
+    (a bone out of range, two pins on one bone)."""
+    if pins is fm.pin_cache[0]:
+        return fm.pin_cache[1]
+    try:
+        bones = np.array([p.bone for p in pins], dtype=_I8)
+        rows = np.array([np.concatenate((p.point, p.target, p.target_quat,
+                                         (p.force_limit, p.torque_limit, float(p.orient))))
+                         for p in pins], dtype=_F8).reshape(len(pins), -1)  # fmt: skip
+    except (TypeError, ValueError, AttributeError):
+        return None
+    if rows.shape[1] != PinVec.SIZE or np.any((bones < 0) | (bones >= nb)):
+        return None
+    if len(np.unique(bones)) != len(bones):
+        return None
+    fm.pin_cache = (pins, (rows, bones))
+    return fm.pin_cache[1]
 
 
 def _coupling_vec(cpl) -> np.ndarray:
@@ -230,7 +257,7 @@ def fast_step(
     time, steps = state.time + model.options.h, state.step + 1
     new = _successor(state, time, steps, out, warm_key, warm_lam, bool(fm.iopt[IOpt.bdf2]))
     fm.last = (new, (out, warm_key, warm_lam))
-    return new, kernel_report(fm.rep_i, rep_f)
+    return new, with_pins(kernel_report(fm.rep_i, rep_f), inp.pins, new)
 
 
 FIELDS = (
@@ -271,7 +298,8 @@ def _direct(cls, names: tuple) -> tuple | None:
 _NEW = object.__new__
 _STATE_REST = _direct(State, ("time", "step", *FIELDS))
 _REPORT_FIELDS = ("rows", "contacts", "iterations", "residual", "solver", "grip_force",
-                  "grip_torque", "touch_force", "substeps")  # fmt: skip
+                  "grip_torque", "touch_force", "substeps", "pin_force", "pin_torque",
+                  "pin_slip")  # fmt: skip
 _DIRECT_REPORT = _direct(StepReport, _REPORT_FIELDS) == ()
 
 
@@ -318,7 +346,8 @@ def kernel_report(rep_i: np.ndarray, rep_f: np.ndarray) -> StepReport:
     values = dict(
         rows=rows, contacts=contacts, iterations=iterations, residual=float(rep_f[_RESIDUAL]),
         solver=SOLVER_NAMES[solver], grip_force=rep_f[GRIP_FORCE], grip_torque=rep_f[GRIP_TORQUE],
-        touch_force=rep_f[TOUCH_FORCE], substeps=1,
+        touch_force=rep_f[TOUCH_FORCE], substeps=1, pin_force=NO_PINS, pin_torque=NO_PINS,
+        pin_slip=NO_SLIP,
     )  # fmt: skip
     if not _DIRECT_REPORT:
         return StepReport(**values)

@@ -171,10 +171,11 @@ StepState = namedtuple("StepState", [
 StepState.NAMES = ("st",)
 """The state a step reads (st): a StateSet's fields but τ, with the warm keys and λ."""
 
-Input = namedtuple("Input", ["force", "torque", "pointer", "coupling", "flags"], module=__name__)
+Input = namedtuple("Input", ["force", "torque", "pointer", "coupling", "flags", "pins",
+                             "pin_bone"], module=__name__)  # fmt: skip
 Input.NAMES = ("inp",)
 """A step's input (inp): force, torque (nb, 3), pointer (Pointer), coupling (Coupling),
-flags (Flags)."""
+flags (Flags), pins (npin, PinVec.SIZE) and their bones pin_bone (npin,) int."""
 
 Pointer = offsets("Pointer", [("pos", 3), ("quat", 4), ("vel", 3), ("omega", 3), ("radius", 1)])
 """pvec: the pointer's pose, velocity, angular velocity and touch radius."""
@@ -184,6 +185,12 @@ Coupling = offsets("Coupling", [
     ("rot_stiffness", 1), ("rot_damping", 1), ("force_limit", 1), ("torque_limit", 1),
 ])  # fmt: skip
 """cvec: the grip's coupling (solver.rows.grip.Coupling's fields)."""
+
+PinVec = offsets("PinVec", [
+    ("point", 3), ("target", 3), ("target_quat", 4), ("force_limit", 1), ("torque_limit", 1),
+    ("orient", 1),
+])  # fmt: skip
+"""A row of inp.pins: solver.rows.pin.Pin's fields of the same names (orient 1.0 or 0.0)."""
 
 Flags = offsets("Flags", [
     ("mode", 1), ("body", 1), ("position_only", 1), ("has_force", 1), ("has_torque", 1),
@@ -288,7 +295,7 @@ STRUCTURES = (
     Scratch, Warm, StepWork, SimArrays, Joints, Rheology, Limits, Bodies,
 )  # fmt: skip
 VECTORS = {"opt": Opt, "iopt": IOpt, "pvec": Pointer, "cvec": Coupling, "ivec": Flags,
-           "rep_i": ReportInt, "rep_f": ReportFloat}  # fmt: skip
+           "pins": PinVec, "rep_i": ReportInt, "rep_f": ReportFloat}  # fmt: skip
 """The vectors with named offsets, by the names kernels give them."""
 
 

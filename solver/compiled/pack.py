@@ -4,8 +4,8 @@
 geometry, forest and workspaces as the named structures of ``solver.compiled.layout``
 (``Packed``), the options as two small arrays with named offsets (``Opt``, ``IOpt``), and
 preallocated row/contact workspaces sized for the worst case (6 rows per joint, 3 limit
-rows per joint, 3 rows per possible contact, and the grip's 6).  The workspaces make a
-FastModel usable by one thread at a time.
+rows per joint, 3 rows per possible contact, the grip's 6 and 6 per bone for pins).  The
+workspaces make a FastModel usable by one thread at a time.
 
 Every array of those structures is a view into a few buffers, ``flat``
 (solver.compiled.flat): the compiled step is passed the buffers and rebuilds the
@@ -75,6 +75,7 @@ class FastModel:
     flags: tuple = (0, 0, False, False, False)  # what ivec holds
     last: tuple = (None, None)  # (State fast_step returned last, its kernel arrays)
     coupling: tuple = (None, None, None)  # (Coupling packed last, its array, its flags)
+    pin_cache: tuple = ((), None)  # (pins packed last, their arrays: fast._pin_arrays)
     pointer: tuple = ()
     subs: dict = field(default_factory=dict)  # n → the FastModel of the step at h/n
     no_history: tuple = ()  # a StateSet's history arrays of a state without one (zeros)
@@ -163,7 +164,7 @@ def pack(model: Model) -> FastModel:
         reason = f"solver method '{o.method}' is not compiled"
     if o.integrator not in INTEGRATORS:
         reason = f"integrator '{o.integrator}' is not compiled"
-    nrows = 9 * nj + 3 * ncontact + 6
+    nrows = 9 * nj + 3 * ncontact + 6 + 6 * nb  # pins: one per bone, 6 rows at most
     ns = len(model.geometry.shape_body)
     ws = Workspace(
         rows=_zeros(Rows, nrows),

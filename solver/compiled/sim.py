@@ -55,6 +55,7 @@ from solver.compiled.layout import (
 )
 from solver.compiled.pack import FastModel
 from solver.rows.grip import follow_steps, path_input
+from solver.rows.pin import with_pins
 from solver.solve.dispatch_kernel import OK
 from solver.state import State, StepInput, StepReport, initial_state
 
@@ -111,6 +112,7 @@ class Sim:
         self._phase = 0
         self.time, self.steps = float(state.time), int(state.step)
         self._handed_back: StepReport | None = None  # the report of a step fast_step made
+        self._pins: tuple = ()  # the last step's pins (its report reads their forces)
 
     @property
     def state(self) -> State:
@@ -165,6 +167,7 @@ class Sim:
         needs afterwards it reads (``report``, ``contacts``, ``state``)."""
         inp = inp or _NO_INPUT
         fm = self._fm
+        self._pins = inp.pins
         ins = _input_arrays(fm, inp) if fm.reason is None else None
         if ins is not None and _KERNEL[0](self._flat, self._phase, ins)[0] == OK:
             self._stepped()
@@ -178,6 +181,7 @@ class Sim:
         pointer's pose changes from step to step, so its arrays are rewritten in place
         and nothing else is made: a rollout's loop without a step's Python around it."""
         fm, n = self._fm, len(wrench)
+        self._pins = ()
         ins = (
             _input_arrays(fm, path_input(path, 0, radius, coupling))
             if n and fm.reason is None
@@ -215,7 +219,8 @@ class Sim:
         """The last step's StepReport (a new one each time: its vectors are its own)."""
         if self._handed_back is not None:
             return self._handed_back
-        return kernel_report(self._rep_i, self._rep_f.copy())
+        report = kernel_report(self._rep_i, self._rep_f.copy())
+        return with_pins(report, self._pins, self.view()) if self._pins else report
 
     @property
     def contacts(self) -> int:

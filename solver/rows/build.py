@@ -1,4 +1,4 @@
-"""All of a step's rows, in a fixed order: joints, contacts, the pointer's rows."""
+"""All of a step's rows, in a fixed order: joints, contacts, the pointer's rows, pins."""
 
 from __future__ import annotations
 
@@ -15,6 +15,7 @@ from solver.rows.joints import (
     limit_rows,
     rheology_rows,
 )
+from solver.rows.pin import pin_rows
 from solver.rows.table import KIND_RHEOLOGY, Rows, concat, take_rows
 from solver.state import State, StepInput
 
@@ -49,6 +50,8 @@ def build_rows(
         if ncontact:
             blocks.append(contact_rows(model, con, state.body_pos, vel_free))
     blocks.extend(_pointer_rows(model, state, inp, vel_free))
+    if inp.pins:
+        blocks.append(_pin_rows(model, state, body_rot, inp.pins, asleep))
     rows = concat(blocks)
     if asleep is None or not asleep.any():
         return rows, ncontact, rheo_joint
@@ -70,6 +73,18 @@ def _awake_rows(model: Model, rows: Rows, asleep: np.ndarray) -> np.ndarray:
     """(n,) bool: rows with a movable side that is awake."""
     awake = np.append((model.body_inv_mass > 0.0) & ~asleep, False)
     return awake[rows.body_a] | awake[rows.body_b]
+
+
+def _pin_rows(
+    model: Model, state: State, body_rot: np.ndarray, pins: tuple, asleep: np.ndarray | None
+) -> Rows:
+    """The pins' rows (solver.rows.pin), for bodies that move and are awake."""
+    movable = model.body_inv_mass > 0.0
+    if asleep is not None:
+        movable = movable & ~asleep
+    o = model.options
+    return pin_rows(pins, state.body_pos, state.body_quat, body_rot, state.body_omega, o.h,
+                    o.joint_erp, movable)  # fmt: skip
 
 
 def _pointer_rows(model: Model, state: State, inp: StepInput, vel_free: np.ndarray) -> list[Rows]:

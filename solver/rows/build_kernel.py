@@ -1,5 +1,5 @@
 """Compiled row building (solver.rows.build.build_rows's twin): every row of a step, in the
-numpy step's order.
+numpy step's order (joints, contacts, the pointer's, pins).
 """
 
 from __future__ import annotations
@@ -13,6 +13,7 @@ from solver.kin_kernel import quat_from, scale, sub, vec_from
 from solver.rows.contacts_kernel import contact_rows
 from solver.rows.grip_kernel import MODE_GRIP, MODE_TOUCH, coupling_rows
 from solver.rows.joints_kernel import anchor_rows, limit_rows, rheology_rows
+from solver.rows.pin_kernel import pin_rows
 from solver.rows.table_kernel import ZERO
 
 
@@ -89,7 +90,10 @@ def build_rows(joints, rheo, limits, g, opt, iopt, st, rot, vel_free, inp, ws, a
         n = coupling_rows(
             pos, quat, h, ptr, cpl, ivec[Flags.body], ivec[Flags.position_only], rw, n
         )
-        return n, ncontact, grip0, n - grip0
+        ngrip = n - grip0
+        n = pin_rows(inp.pins, inp.pin_bone, pos, quat, rot, st.omega, h, opt[Opt.joint_erp],
+                     awake, rw, n)  # fmt: skip
+        return n, ncontact, grip0, ngrip
     if ivec[Flags.mode] == MODE_TOUCH:
         u = vec_from(pvec, Pointer.vel)
         pc = sub(vec_from(pvec, Pointer.pos), scale(h, u))  # where the pointer was
@@ -109,4 +113,7 @@ def build_rows(joints, rheo, limits, g, opt, iopt, st, rot, vel_free, inp, ws, a
             rw,
             n,
         )
-    return n, ncontact, n, 0
+    grip0 = n
+    n = pin_rows(inp.pins, inp.pin_bone, pos, quat, rot, st.omega, h, opt[Opt.joint_erp], awake,
+                 rw, n)  # fmt: skip
+    return n, ncontact, grip0, 0

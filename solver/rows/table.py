@@ -24,7 +24,7 @@ import numpy as np
 
 from solver import quat
 
-KIND_JOINT, KIND_RHEOLOGY, KIND_LIMIT, KIND_CONTACT, KIND_FRICTION, KIND_GRIP = range(6)
+KIND_JOINT, KIND_RHEOLOGY, KIND_LIMIT, KIND_CONTACT, KIND_FRICTION, KIND_GRIP, KIND_PIN = range(7)
 # Key layout: kind in the top bits, then up to 2**40 per-kind identities.
 KEY_SHIFT = 40
 

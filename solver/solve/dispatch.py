@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from solver.model import Model
-from solver.rows.table import Rows
+from solver.rows.table import KIND_PIN, Rows
 from solver.solve.direct import direct_solve
 from solver.solve.hybrid import hybrid_solve
 from solver.solve.pgs import pgs_solve
@@ -31,8 +31,8 @@ def solve(model: Model, state: State, rows: Rows, resp: tuple, vel_free: np.ndar
     """(λ, velocities, iterations, residual, solver name) for the step's rows."""
     opt = model.options
     method = opt.method
-    if method == "auto":
-        method = "direct" if rows.bilateral else "hybrid"
+    if method == "auto":  # pins' rows are iterated (hybrid): the compiled tree has no pin nodes
+        method = "direct" if rows.bilateral and not np.any(rows.kind == KIND_PIN) else "hybrid"
     lam0 = warm_start(model, state, rows)
     if method == "direct":
         if not rows.bilateral:

@@ -10,7 +10,7 @@ import numpy as np
 
 from solver.compiled.layout import IOpt, Opt
 from solver.jit import kernel
-from solver.rows.table import KIND_GRIP, KIND_RHEOLOGY
+from solver.rows.table import KIND_GRIP, KIND_PIN, KIND_RHEOLOGY
 from solver.rows.table_kernel import is_null
 from solver.solve.direct import direct_solve
 from solver.solve.direct_kernel import row_velocity
@@ -115,13 +115,14 @@ def solve(bw, tree, rw, opt, iopt, warm, n, vel_free, grip, asleep, sv, lam0, la
     (keys, λ); lam0 (≥ n): the warm start, made here; sv: the solvers' scratch arrays
     (layout.SolverScratch), so none of them allocates."""
     lo, hi, fric, kind = rw.lo, rw.hi, rw.fric_of, rw.kind
-    bilateral = True
+    bilateral, pinned = True, False
     for i in range(n):
         if not (lo[i] < 0.0 and hi[i] > 0.0 and fric[i] < 0):
             bilateral = False
+        pinned = pinned or kind[i] == KIND_PIN  # pins are iterated (solver.solve.dispatch)
     method = iopt[IOpt.method]
-    hybrid = method == METHOD_HYBRID or (method == METHOD_AUTO and not bilateral)
-    exact = method == METHOD_DIRECT or (method == METHOD_AUTO and bilateral)
+    hybrid = method == METHOD_HYBRID or (method == METHOD_AUTO and not (bilateral and not pinned))
+    exact = method == METHOD_DIRECT or (method == METHOD_AUTO and bilateral and not pinned)
     ne = 0
     while (hybrid or exact) and ne < n and kind[ne] <= KIND_RHEOLOGY:
         ne += 1

@@ -22,7 +22,9 @@ trace's per-step samples supply what a key does not hold.  The oracles:
 - free_push: the pointer ball meets the right hand and sinks into no bone; afterwards the
   right arm hangs in static equilibrium, as above;
 - arm_push: the push and gravity lie in the plane z = 0, so the arm moves in it; settled,
-  the elbow's spring holds the forearm and hand.
+  the elbow's spring holds the forearm and hand;
+- pin_pose: the pinned head and feet keep their rest pose while both arms are posed, and
+  the traced pins are the three pinned bones, never slipping, until unpinned.
 """
 
 from __future__ import annotations
@@ -43,7 +45,7 @@ from puppetcli.mcap.trace import read_trace
 
 ROOT = Path(__file__).resolve().parents[2]
 DOLL = ROOT / "rigs" / "doll.yaml"
-DOLL_SCRIPTS = ["wave", "head_twist", "kneel", "hand_on_table", "free_push", "arm_push"]
+DOLL_SCRIPTS = ["wave", "head_twist", "kneel", "hand_on_table", "free_push", "arm_push", "pin_pose"]
 RIG = yaml.safe_load(DOLL.read_text())
 BONES = {b["name"]: b for b in RIG["bones"]}
 GRAVITY = np.array(RIG["gravity"], float)
@@ -341,3 +343,19 @@ def test_arm_push_moves_the_arm_in_the_plane_of_the_push(posed):
             assert np.abs(rotation(key, bone, "local").as_rotvec()[:2]).max() < 1e-12  # 0
     bend = rotation(run.keys["settled"], "forearm_l", "local").magnitude()
     assert np.degrees(bend) > 20  # the push did bend the elbow (33°), the check is not vacuous
+
+
+def test_pin_pose_keeps_the_pinned_bones_where_they_were(posed):
+    run = posed("pin_pose")
+    rest, done = run.keys["rest"], run.keys["posed"]
+    # measured: the head 6.3e-9 m and 2.8e-10 rad, the feet 8.9e-10 m and 1.9e-11 rad
+    for bone, metres, radians in (("head", 3e-8, 1.5e-9), ("foot_l", 5e-9, 1e-10),
+                                  ("foot_r", 5e-9, 1e-10)):  # fmt: skip
+        assert np.linalg.norm(head(done, bone) - head(rest, bone)) < metres, bone
+        angle = (rotation(done, bone) * rotation(rest, bone).inv()).magnitude()
+        assert angle < radians, bone
+    assert (rotation(done, "forearm_l") * rotation(rest, "forearm_l").inv()).magnitude() > 0.3
+    listed = run.series("/puppet/pin_force")
+    bones = {tuple(sorted(p["bone"] for p in m["pins"])) for m in listed}
+    assert bones == {("foot_l", "foot_r", "head"), ()}  # all three, then none after unpin all
+    assert not any(p["slipped"] for m in listed for p in m["pins"])

@@ -89,7 +89,7 @@ def creep_run(h: float, integrator: str, engine: str) -> np.ndarray:
 def test_creep_follows_the_bdf2_recursion(engine):
     got = creep_run(0.02, "bdf2", engine)
     want = bdf2_recursion(0.02)
-    # measured: 2.6e-15 rad on both over 300 steps (θ ≈ 0.1 rad)
+    # measured: 2.1e-15 rad on both over 300 steps (θ ≈ 0.1 rad)
     assert np.abs(got - want).max() < 1e-14
 
 
@@ -133,7 +133,7 @@ def test_a_released_chain_converges_to_the_truth_at_second_order():
         tips, truth = _chain_tips(h, 0.2)
         errors.append(np.linalg.norm(tips - truth, axis=1).max())
     ratios = np.array(errors[:-1]) / np.array(errors[1:])
-    # measured: errors 2.6e-4, 6.5e-5, 1.6e-5 m; ratios 4.06 and 4.09
+    # measured: errors 2.5e-4, 6.3e-5, 1.6e-5 m; ratios 4.02 and 4.09
     assert np.all(ratios > 3.6), errors
 
 
@@ -146,7 +146,7 @@ def test_numpy_and_compiled_bdf2_agree_on_the_grip_scene():
         for inp in inputs:
             stepper.advance(inp)
         runs.append(stepper.state)
-    # measured: 4.4e-16 m after 80 steps with contacts, limits and a yielding shoulder
+    # measured: 2.7e-16 m after 80 steps with contacts, limits and a yielding shoulder
     assert np.abs(runs[0].body_pos - runs[1].body_pos).max() < 1e-13
     assert runs[0].prev_h == runs[1].prev_h == 0.005
 

@@ -32,6 +32,7 @@ from solver.model import build_model
 from solver.observe import bone_points, joint_gaps, joint_rotations
 from solver.pipeline import step
 from solver.rows.grip import Pointer, make_coupling
+from solver.rows.pin import make_pin
 from solver.solve import hybrid
 from solver.solve.hybrid_kernel import NU_CAP
 from solver.spec import BoneSpec, GroundSpec, RigSpec, ShapeSpec
@@ -75,8 +76,9 @@ def lockstep(model, state, inputs):
             assert close(getattr(a, name), getattr(b, name)), (where, name)
         for name in FORCES:
             assert close(getattr(a, name), getattr(b, name), scale=True), (where, name)
-        for name in ("grip_force", "grip_torque", "touch_force"):
+        for name in ("grip_force", "grip_torque", "touch_force", "pin_force", "pin_torque"):
             assert close(getattr(ra, name), getattr(rb, name), scale=True), (where, name)
+        assert np.array_equal(ra.pin_slip, rb.pin_slip), where
         reports.append(rb)
     return reports
 
@@ -133,6 +135,32 @@ def test_ten_link_chain_with_yield_grip_and_projection_matches():
     reports = lockstep(model, state, inputs)
     assert {r.solver for r in reports} == {"direct"}
     assert sum(np.abs(r.grip_force).max() == 8.0 for r in reports) > 100
+
+
+def test_pinned_chain_with_a_grip_and_a_slipping_pin_matches():
+    # a free 10-link chain: its root pinned whole, link 5 at its tail with a force limit
+    # it reaches (it slips), the tip gripped and pulled up: pin rows after the grip's,
+    # iterated by the hybrid solve in both steps
+    h = 0.005
+    model = build_model(chain(10, h, root_mode="free", rheo=rheology(5.0, 0.5, 2.0, 0.8)))
+    state = initial_state(model)
+    mid = model.bone_tail0[5] - model.body_pos0[5]
+    pins = (make_pin(state, 0, orient=True), make_pin(state, 5, mid, force_limit=3.0))
+    tip = model.bone_tail0[9]
+    still = Pointer(tip, quat.IDENTITY.copy(), np.zeros(3), np.zeros(3))
+    grip = make_coupling(
+        state, still, 9, tip, stiffness=500.0, damping=5.0, rot_stiffness=2.0,
+        rot_damping=0.05, force_limit=8.0, torque_limit=0.5,
+    )  # fmt: skip
+    up = np.array([0.0, 0.3, 0.1])
+    inputs = []
+    for k in range(200):
+        ptr = Pointer(tip + (k + 1) * h * up, quat.IDENTITY.copy(), up, np.zeros(3))
+        inputs.append(StepInput(pointer=ptr, coupling=grip, pins=pins))
+    reports = lockstep(model, state, inputs)
+    assert {r.solver for r in reports} == {"hybrid"}
+    assert sum(r.pin_slip[1] for r in reports) > 50
+    assert not any(r.pin_slip[0] for r in reports)
 
 
 @pytest.mark.parametrize("root_mode", ["fixed", "free", "ball"])

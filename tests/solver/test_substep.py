@@ -12,7 +12,7 @@ from rigbuild import chain
 
 from puppetcli.bench import stress
 from solver import quat
-from solver.advance.substep import model_substeps, pointer_at, run_substeps
+from solver.advance.substep import model_substeps, pointer_at, run_substeps, sub_model
 from solver.engine import Engine
 from solver.model import build_model
 from solver.pipeline import step
@@ -128,7 +128,9 @@ def test_a_substepped_step_is_its_substeps():
     force[2] = [0.0, 5.0, 0.0]
     inp = StepInput(body_force=force)
     state = initial_state(model)
-    whole, report = run_substeps(model, state, inp, 4, step)
+    whole, report = run_substeps(
+        model, state, inp, 4, lambda d, s, i: step(sub_model(model, d), s, i)
+    )
     sub = model.with_options(h=0.0025, max_substeps=1)
     parts = state
     iterations = 0

@@ -120,6 +120,16 @@ def test_skips_command_prints_each_skip_with_its_ratio():
         assert float(r[5]) <= 1e-5 and float(r[6]) <= 1e-5  # the runs agree
 
 
+def test_pins_command_prints_0_1_and_4_pins_holding():
+    result = CliRunner().invoke(command, ["--pins", "--seconds", "0.02"])
+    assert result.exit_code == 0, result.output
+    printed = [line.split() for line in result.output.splitlines()[3:]]
+    assert [r[0] for r in printed] == ["0", "1", "4"]
+    for count, _, ratio, _, _, solver, drift in printed:
+        assert solver == "hybrid" and float(drift) < 1e-6  # the pinned points held
+        assert count != "0" or float(ratio) == 1.0  # the ratio's base
+
+
 def test_doll_stages_cover_the_step():
     stages = bench.doll_stages(0.005, 0.05)
     from solver.compiled.clock import STAGES

@@ -37,6 +37,11 @@ def test_the_documented_messages_parse():
     assert parse({"type": "pause", "on": True})[1] == protocol.Pause(True)
     assert parse({"type": "stop"})[1] == protocol.Stop()
     assert parse({"type": "ping", "t": 12.5})[1] == protocol.Ping(12.5)
+    _, c = parse({"type": "pin", "bone": "hips", "point": [0, 1, 0], "orient": True})
+    assert (c.bone, c.orient) == ("hips", True) and np.array_equal(c.point, [0, 1, 0])
+    assert parse({"type": "pin", "bone": "hips", "point": [0, 1, 0]})[1].orient is False
+    assert parse({"type": "unpin", "bone": "forearm_l"})[1] == recording.Unpin("forearm_l")
+    assert parse({"type": "unpin"})[1] == recording.Unpin(None)
 
 
 BAD = [
@@ -55,6 +60,10 @@ BAD = [
     ({"type": "grip", "position_only": "no"}, "position_only: expected true or false"),
     ({"type": "key", "label": "x" * 65}, "label: expected printable text of at most 64"),
     ({"type": "key", "label": "a\nb"}, "label: expected printable text"),
+    ({"type": "pin", "bone": "tail", "point": [0, 0, 0]}, "bone: expected a bone of the rig"),
+    ({"type": "pin", "bone": "hips"}, "point: expected 3 numbers"),
+    ({"type": "pin", "bone": "hips", "point": [0, 0, 0], "orient": 1}, "orient: expected true"),
+    ({"type": "unpin", "bone": 3}, "bone: expected a bone of the rig"),
     ({"type": "launch"}, "type: expected one of"),
     ({"type": "stop", "seq": -1}, "seq: expected a non-negative integer"),
     ({"type": "stop", "seq": 1.5}, "seq: expected a non-negative integer"),

@@ -329,7 +329,7 @@ def test_undo_drops_the_last_key_and_labels_count_every_key(tmp_path):
 
 
 def test_a_session_of_a_newer_format_is_refused(tmp_path):
-    path = write_raw(tmp_path / "new.mcap", ticks() + KEY, meta={**GOOD_META, "format": "3"})
+    path = write_raw(tmp_path / "new.mcap", ticks() + KEY, meta={**GOOD_META, "format": "4"})
     assert bad(tmp_path, path) == (
-        "metadata.format: expected 1 or 2 (a newer puppetcli wrote this file), got '3'"
+        "metadata.format: expected 1 or 2 or 3 (a newer puppetcli wrote this file), got '4'"
     )

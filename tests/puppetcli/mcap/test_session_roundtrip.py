@@ -14,7 +14,7 @@ from puppetcli.run.keyframes import read_keyframes
 
 ROOT = Path(__file__).resolve().parents[3]
 DOLL = ROOT / "rigs/doll.yaml"
-DOLL_SCRIPTS = ["wave", "head_twist", "kneel", "hand_on_table", "free_push", "arm_push"]
+DOLL_SCRIPTS = ["wave", "head_twist", "kneel", "hand_on_table", "free_push", "arm_push", "pin_pose"]
 TOLERANCE_DEG = 0.5  # measured: 0.175° (free_push), 0.173° (hand_on_table), 0.14° (wave)
 
 

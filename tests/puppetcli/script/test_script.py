@@ -138,6 +138,8 @@ def test_action_table_lists_the_actions() -> None:
         "release",
         "touch",
         "expect",
+        "pin",
+        "unpin",
     }
 
 
@@ -469,7 +471,8 @@ def test_unknown_pointer_action_suggests(tmp_path: Path, rig: RigSpec) -> None:
         tmp_path,
         line_of(text, "twsit"),
         "actions[3].twsit",
-        "an action name (push, wait, key, grip, move, rotate, twist, release, touch, expect)",
+        "an action name (push, wait, key, grip, move, rotate, twist, release, touch, expect, "
+        "pin, unpin)",
         "got 'twsit' (did you mean 'twist'?)",
     )
 

@@ -18,6 +18,7 @@ export class Hud {
     $('touch-btn').onclick = () => link.send({ type: 'touch', on: !this.frame?.touch });
     $('posonly-btn').onclick = () => link.send({ type: 'position_only', on: !this.frame?.position_only });
     $('release-btn').onclick = () => this.onRelease();
+    $('unpin-btn').onclick = () => link.send({ type: 'unpin' });
     $('help-btn').onclick = () => this.toggleHelp();
     $('stop-btn').onclick = () => this.stop();
     // A clicked button gives the focus back, so Space / Enter stay shortcuts (not a second click).

@@ -92,6 +92,7 @@ export class Input {
     if (!touch && !hit) return; // the camera's drag
     e.stopPropagation();
     e.preventDefault();
+    if (hit && e.altKey) { this.togglePin(hit, e.shiftKey); return; } // Alt+click: pin / unpin
     if (hit) {
       if (this.held) { this.command({ type: 'release' }); this.held = false; }
       this.pos.copy(hit.point);
@@ -157,6 +158,7 @@ export class Input {
     const actions = {
       k: () => this.takeKey(), Enter: () => this.takeKey(),
       u: () => this.command({ type: 'undo' }),
+      x: () => this.command({ type: 'unpin' }),
       z: () => e.ctrlKey && this.command({ type: 'undo' }),
       '/': () => e.shiftKey && this.ui.toggleHelp(), // "?" on layouts that report the unshifted key
       ' ': () => this.ui.togglePause(), p: () => this.ui.togglePause(),
@@ -173,6 +175,14 @@ export class Input {
       PageDown: () => this.held && this.moveBy(forward.multiplyScalar(-step)),
     };
     if (actions[k]) { actions[k](); e.preventDefault(); }
+  }
+
+  // Pin the clicked bone at the clicked point (Shift: its orientation too), or unpin it if
+  // it is pinned.
+  togglePin(hit, orient) {
+    const pinned = (this.frame?.pins || []).some((p) => p.bone === hit.bone);
+    if (pinned) this.command({ type: 'unpin', bone: hit.bone });
+    else this.command({ type: 'pin', bone: hit.bone, point: hit.point.toArray(), orient });
   }
 
   takeKey() {

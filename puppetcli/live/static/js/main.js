@@ -11,6 +11,7 @@ const puppet = {
   resetLatency: () => { link.samples.length = 0; },
   screenOf: (bone) => view && view.screenOf(bone),
   screenOfWorld: (p) => view && view.screenOfWorld(p),
+  pinMarks: () => (view ? view.pins.children.map((m) => m.userData.bone) : []),
 };
 window.puppet = puppet;
 window.addEventListener('error', (e) => puppet.errors.push(String(e.message)));

@@ -3,6 +3,7 @@
 import * as THREE from 'three';
 import { OrbitControls } from '/static/vendor/three/OrbitControls.js';
 
+const PIN_COLOR = 0x2f7fd8;
 const v3 = (a) => new THREE.Vector3(a[0], a[1], a[2]);
 const q4 = (q) => new THREE.Quaternion(q[1], q[2], q[3], q[0]); // (w,x,y,z) -> three's (x,y,z,w)
 
@@ -135,6 +136,30 @@ export class View {
     this.scene.add(this.coupling);
     this.arrow = new THREE.ArrowHelper(new THREE.Vector3(0, 1, 0), new THREE.Vector3(), 0.1, 0xc0392b);
     this.scene.add(this.arrow);
+    this.pins = new THREE.Group(); // one marker per pin, made as pins come
+    this.scene.add(this.pins);
+    this.pinGeometry = { point: new THREE.SphereGeometry(0.014, 12, 8), bone: new THREE.BoxGeometry(0.04, 0.04, 0.04) };
+    this.pinMaterial = {
+      point: new THREE.MeshBasicMaterial({ color: PIN_COLOR, depthTest: false }),
+      bone: new THREE.MeshBasicMaterial({ color: PIN_COLOR, depthTest: false, wireframe: true }),
+    };
+  }
+
+  // The pins: a ball where a point pin holds its point, a wire cube for a whole-bone pin.
+  updatePins(pins) {
+    const signature = pins.map((p) => `${p.bone}:${p.orient}`).join();
+    if (signature !== this.pinSignature) { // pinned or unpinned: new markers
+      this.pinSignature = signature;
+      this.pins.clear();
+      for (const pin of pins) {
+        const kind = pin.orient ? 'bone' : 'point';
+        const mark = new THREE.Mesh(this.pinGeometry[kind], this.pinMaterial[kind]);
+        mark.renderOrder = 11;
+        mark.userData.bone = pin.bone;
+        this.pins.add(mark);
+      }
+    }
+    pins.forEach((pin, i) => this.pins.children[i].position.copy(v3(pin.target)));
   }
 
   update(frame) {
@@ -157,6 +182,7 @@ export class View {
       pos.setXYZ(1, ...frame.grip.point);
       pos.needsUpdate = true;
     }
+    this.updatePins(frame.pins || []);
     const force = v3(frame.wrench.force);
     const size = force.length();
     this.arrow.visible = size > 0.2;
