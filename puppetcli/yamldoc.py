@@ -252,8 +252,9 @@ class Node:
             self.fail(expected)
         if abs(value) > LARGEST:
             self.fail(f"{expected} of magnitude at most {LARGEST:g}")
-        if minimum == 0.0 and exclusive and value < SMALLEST:
-            self.fail(f"{expected} of at least {SMALLEST:g}")
+        if minimum == 0.0 and value < SMALLEST and (exclusive or value > 0.0):
+            self.fail(f"{expected}: 0 or at least {SMALLEST:g}" if not exclusive
+                      else f"{expected} of at least {SMALLEST:g}")  # fmt: skip
         return value
 
     def positive(self) -> float:

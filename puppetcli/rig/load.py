@@ -373,10 +373,22 @@ def _bone_joint(
     node = entry.fields.get("joint")
     own = {} if node is None else _joint_settings(node)
     if not is_root or root_mode == "ball":
-        return _joint_specs({**defaults, **own})
+        rheology, limits = _joint_specs({**defaults, **own})
+        free = (rheology.kf == 0.0) & (rheology.df == 0.0)
+        if rheology.active and free.any():
+            (node or entry.node).fail(
+                "kf or df above 0 about every axis of a joint that has a spring or damper"
+                " (for a nearly free axis, a small df)",
+                got=f"kf {_axes_text(rheology.kf)} and df {_axes_text(rheology.df)}",
+            )
+        return rheology, limits
     if node is not None:
         node.fail(f"no 'joint' on a {root_mode} root (it has one only with root: ball)")
     return None, LimitSpec()
+
+
+def _axes_text(values: np.ndarray) -> str:
+    return "[" + ", ".join(f"{v:g}" for v in values) + "]"
 
 
 def _mass(fields: Fields, volume: float, default_density: float) -> float:

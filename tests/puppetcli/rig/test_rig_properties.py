@@ -66,8 +66,7 @@ def vectors(bound: float, least: float = 0.0):
 
 def scalar_or_axes(low: float, high: float, zero: bool = False):
     """One number for all three axes, or ``[x, y, z]`` (the format allows both); with
-    ``zero``, 0 too.  (Coefficients below 1e-9 are refused by the docs but accepted by the
-    loader, and kf·h + df below ~1e-308 overflows the step: reported, not drawn.)"""
+    ``zero``, 0 too (the loader refuses numbers between 0 and 1e-9)."""
     value = st.floats(low, high)
     value = st.one_of(st.just(0.0), value) if zero else value
     return st.one_of(value, st.lists(value, min_size=3, max_size=3))
@@ -176,11 +175,28 @@ def _rig_documents(draw, roots: tuple, sensible: bool) -> dict:
         "h": draw(st.sampled_from([0.002, 0.005, 0.01])),
         "method": method,
         "iterations": draw(st.integers(*sweeps)),
-        "warm_start_factor": draw(st.floats(*reuse)),
+        # (the loader refuses numbers between 0 and 1e-9: a positive one is at least 1e-9)
+        "warm_start_factor": draw(st.floats(*reuse).filter(lambda x: x == 0.0 or x >= 1e-9)),
     }
     if sensible:
         _soft_enough(doc)
+    _no_free_axes(doc)
     return doc
+
+
+def _no_free_axes(doc: dict) -> None:
+    """Give a small df (0.05 N·m·s/rad) to every axis where a joint with a spring or damper
+    has neither: the loader refuses such a free axis (docs/rig-format.md)."""
+    defaults = doc.get("defaults", {}).get("joint", {})
+    for bone in doc["bones"]:
+        if "parent" not in bone and doc["root"] != "ball":
+            continue
+        merged = {**defaults, **bone.get("joint", {})}
+        kf = np.broadcast_to(merged.get("kf", 0.0), 3).astype(float)
+        df = np.broadcast_to(merged.get("df", 0.0), 3).astype(float)
+        free = (kf == 0.0) & (df == 0.0)
+        if free.any() and not free.all():
+            bone.setdefault("joint", {})["df"] = np.where(free, 0.05, df).tolist()
 
 
 def _soft_enough(doc: dict) -> None:

@@ -157,6 +157,13 @@ def bad(tmp_path: Path, old: str, new: str) -> tuple[str, str]:
     return rig_error(tmp_path, text), text
 
 
+def test_a_free_axis_of_a_sprung_joint_names_the_bone(tmp_path: Path) -> None:
+    # kf and df both 0 about y while x and z have a spring: the row would divide by 0
+    message, text = bad(tmp_path, "{kf: [1, 2, 3], twist: ~}", "{kf: [1, 0, 3], df: [2, 0, 2]}")
+    expect(message, tmp_path, line_of(text, "df: [2, 0, 2]"), "bones[1].joint",
+           "kf [1, 0, 3] and df [2, 0, 2]")  # fmt: skip
+
+
 def test_unknown_top_level_key_suggests(tmp_path: Path) -> None:
     message, text = bad(tmp_path, "ground:", "grund:")
     expect(message, tmp_path, line_of(text, "grund"), "grund", "got 'grund'", "'ground'?")
@@ -255,6 +262,8 @@ def test_bad_inertia(tmp_path: Path, new: str, got: str) -> None:
             "expected a positive finite number, got .inf",
         ),
         ("yield: 5.0", "yield: on", "defaults.joint.yield", "got boolean true"),
+        # a coefficient between 0 and 1e-9: kf·h + df would underflow to 0 (a NaN at step 0)
+        ("kf: 50.0", "kf: 1.0e-308", "defaults.joint.kf", "0 or at least 1e-09, got 1.0e-308"),
     ],
 )
 def test_negative_or_non_finite_coefficients(
