@@ -172,6 +172,14 @@ class Model:
         return replace(self, options=replace(self.options, **changes))
 
 
+def shape_centre(bone) -> np.ndarray:
+    """Rest-pose world centre (3,) of a bone's shape: a capsule's or box's midpoint of head
+    and tail; a sphere's too, or its centre of mass when the bone gives one."""
+    if bone.shape.kind == "sphere" and bone.com is not None:
+        return np.asarray(bone.com, dtype=float)
+    return 0.5 * (bone.head + bone.tail)
+
+
 def build_model(spec: RigSpec) -> Model:
     """Build the frozen model of a validated rig."""
     bones = spec.bones
@@ -185,14 +193,13 @@ def build_model(spec: RigSpec) -> Model:
     pos0 = np.zeros((nb, 3))
     quat0 = np.tile(quat.IDENTITY, (nb, 1))
     for i, b in enumerate(bones):
-        centre = 0.5 * (b.head + b.tail)
-        pos0[i] = b.com if b.com is not None else centre
+        pos0[i] = b.com if b.com is not None else 0.5 * (b.head + b.tail)
         mass[i] = b.mass
         if b.inertia is not None:
             inertia[i] = b.inertia
         else:
             # Shape inertia about its centre, moved to the centre of mass.
-            offset = centre - pos0[i]
+            offset = shape_centre(b) - pos0[i]
             inertia[i] = world_inertia(b.shape, b.head, b.tail, b.mass) + b.mass * (
                 offset @ offset * np.eye(3) - np.outer(offset, offset)
             )
@@ -331,13 +338,10 @@ def _geometry(
     for i, b in enumerate(spec.bones):
         if b.collide:
             length = float(np.linalg.norm(b.tail - b.head))
-            centre_w = (
-                0.5 * (b.head + b.tail) if b.shape.kind != "sphere" or b.com is None else b.com
-            )
             add(
                 i,
                 b.shape,
-                centre_w - pos0[i],
+                shape_centre(b) - pos0[i],
                 shape_frame(b.head, b.tail),
                 length,
                 spec.bone_friction,

@@ -17,7 +17,8 @@ import pytest
 from scipy.integrate import quad
 
 from solver.massprops import shape_inertia_local, shape_volume
-from solver.spec import ShapeSpec
+from solver.model import build_model
+from solver.spec import BoneSpec, RigSpec, ShapeSpec
 
 
 def revolution(profile, half: float) -> tuple[float, float, float]:
@@ -83,3 +84,25 @@ def test_box_volume_and_inertia_are_the_integrals_over_it():
     assert shape_volume(shape, 0.24) == pytest.approx(volume, rel=1e-12)  # measured 0
     inertia = shape_inertia_local(shape, 0.24, mass)
     np.testing.assert_allclose(inertia, np.diag(moments) * mass / volume, rtol=1e-12)
+
+
+@pytest.mark.parametrize("offset", [0.0, 0.04])
+def test_a_sphere_centred_on_its_com_has_its_own_inertia_there(offset):
+    # rig-format: "a sphere is centred on the midpoint (or on com when given)": a sphere
+    # bone whose com is off the head–tail midpoint is a uniform ball about that com, so its
+    # body inertia is the integral's, with no parallel-axis term (it had m·|midpoint − com|²)
+    radius, mass = 0.05, 2.0
+    volume, axial, _ = revolution(capsule_profile(radius, 0.0), radius)
+    com = np.array([0.0, 0.05 + offset, 0.0])  # the midpoint of head and tail is y = 0.05
+    spec = rig_with_sphere(com, radius, mass)
+    model = build_model(spec)
+    want = np.eye(3) * axial * mass / volume
+    np.testing.assert_allclose(model.body_inertia[0], want, rtol=1e-12)  # measured 1e-16
+    np.testing.assert_array_equal(model.body_pos0[0], com)
+    assert np.abs(model.geometry.shape_pos[0]).max() == 0.0  # the ball sits on the com
+
+
+def rig_with_sphere(com: np.ndarray, radius: float, mass: float):
+    bone = BoneSpec("ball", None, np.zeros(3), np.array([0.0, 0.1, 0.0]),
+                    ShapeSpec("sphere", radius=radius), mass, com=com)  # fmt: skip
+    return RigSpec("one", (bone,), root_mode="free")
