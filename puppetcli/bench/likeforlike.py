@@ -163,7 +163,7 @@ SMALL, LARGE = Samples(), Samples(1.0, 2.0)
 def true_tails(name: str, samples: Samples = SMALL) -> np.ndarray:
     """(ntimes, nbone, 3) the bones' tails at the sample times by the truth; kept in
     ``truth_cache()`` under a hash of the scene's model, start, samples and the truth's
-    source (the doll's takes ~4 minutes)."""
+    source (the released doll's takes ~2 minutes)."""
     sc = scene(name)
     key = _truth_key(sc, samples)
     path = truth_cache() / f"{name}-{key}.npy"

@@ -42,6 +42,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 import scipy.integrate
 from scipy.spatial.transform import Rotation
@@ -149,6 +150,32 @@ class Kinematics:
     rot_parent: np.ndarray
 
 
+@numba.njit(cache=True)
+def _down_the_tree(child, parent, anchor_p, anchor_c, rel, u, pos, rot, vel, omega, acc0, alpha0,
+                   anchor, rot_parent):  # fmt: skip
+    """The recursion of the module docstring, parents first (compiled: in Python its ~30
+    small vector operations a joint were 3/4 of the doll's derivative)."""
+    for k in range(len(child)):
+        c, p = child[k], parent[k]
+        r_p = rot[p].copy()
+        rot[c] = r_p @ rel[k]
+        a = pos[p] + r_p @ anchor_p[k]
+        pos[c] = a - rot[c] @ anchor_c[k]
+        r_pa, r_ac = a - pos[p], pos[c] - a
+        w_rel = r_p @ u[k]
+        omega[c] = omega[p] + w_rel
+        vel[c] = vel[p] + np.cross(omega[p], r_pa) + np.cross(omega[c], r_ac)
+        alpha0[c] = alpha0[p] + np.cross(omega[p], w_rel)
+        acc0[c] = (
+            acc0[p]
+            + np.cross(alpha0[p], r_pa)
+            + np.cross(omega[p], np.cross(omega[p], r_pa))
+            + np.cross(alpha0[c], r_ac)
+            + np.cross(omega[c], np.cross(omega[c], r_ac))
+        )
+        anchor[k], rot_parent[k] = a, r_p
+
+
 def kinematics(tree: Tree, q: np.ndarray, u: np.ndarray) -> Kinematics:
     """Forward kinematics of joint coordinates q (n,4) (normalised here) and u (n,3)."""
     m = tree.model
@@ -159,25 +186,11 @@ def kinematics(tree: Tree, q: np.ndarray, u: np.ndarray) -> Kinematics:
     rel = _rotation(q / np.linalg.norm(q, axis=1, keepdims=True))
     anchor = np.zeros((len(tree.joint), 3))
     rot_parent = np.zeros((len(tree.joint), 3, 3))
-    for k, j in enumerate(tree.joint):
-        c, p = tree.child[k], tree.parent[k]
-        r_p = rot[p]
-        rot[c] = r_p @ rel[k]
-        a = pos[p] + r_p @ m.joint_anchor_parent[j]
-        pos[c] = a - rot[c] @ m.joint_anchor_child[j]
-        r_pa, r_ac = a - pos[p], pos[c] - a
-        w_rel = r_p @ u[k]
-        omega[c] = omega[p] + w_rel
-        vel[c] = vel[p] + _cross(omega[p], r_pa) + _cross(omega[c], r_ac)
-        alpha0[c] = alpha0[p] + _cross(omega[p], w_rel)
-        acc0[c] = (
-            acc0[p]
-            + _cross(alpha0[p], r_pa)
-            + _cross(omega[p], _cross(omega[p], r_pa))
-            + _cross(alpha0[c], r_ac)
-            + _cross(omega[c], _cross(omega[c], r_ac))
-        )
-        anchor[k], rot_parent[k] = a, r_p
+    _down_the_tree(
+        tree.child, tree.parent, m.joint_anchor_parent[tree.joint],
+        m.joint_anchor_child[tree.joint], rel, np.ascontiguousarray(u), pos, rot, vel, omega,
+        acc0, alpha0, anchor, rot_parent,
+    )  # fmt: skip
     return Kinematics(
         pos[:nb], rot[:nb], vel[:nb], omega[:nb], acc0[:nb], alpha0[:nb], anchor, rot_parent
     )
