@@ -49,9 +49,13 @@ def step(model: Model, state: State, inp: StepInput | None = None) -> tuple[Stat
     n = model_substeps(model, state)
     if n > 1:
         return run_substeps(model, state, inp, n, partial(_part, model))
-    if bdf2.restarts(model, state, inp):
-        return run_parts(model, state, inp, bdf2.RESTART, partial(_part, model))
-    return _step_once(model, state, inp, body_rot)
+    history = None  # BDF2: (the input's fingerprint, the step ratio)
+    if model.options.integrator == "bdf2":
+        load = bdf2.load(inp, model.nbody)
+        history = (load, bdf2.ratio(state, model.options.h, load))
+        if bdf2.restarts(model, history[1]):
+            return run_parts(model, state, inp, bdf2.RESTART, partial(_part, model))
+    return _step_once(model, state, inp, body_rot, history)
 
 
 def _part(model: Model, d: int, state: State, inp: StepInput) -> tuple[State, StepReport]:
@@ -60,12 +64,13 @@ def _part(model: Model, d: int, state: State, inp: StepInput) -> tuple[State, St
 
 
 def _step_once(
-    model: Model, state: State, inp: StepInput, body_rot: np.ndarray
+    model: Model, state: State, inp: StepInput, body_rot: np.ndarray, history: tuple | None
 ) -> tuple[State, StepReport]:
+    """One step without subdivision; ``history``: BDF2's (input fingerprint, step ratio),
+    None for the paper's step."""
     h = model.options.h
-    bdf = model.options.integrator == "bdf2"
-    load = bdf2.load(inp, model.nbody) if bdf else 0.0
-    pred = bdf2.prediction(model, state, load) if bdf else None
+    bdf = history is not None
+    pred = bdf2.predict(model, state, history[1]) if bdf else None
     # The stage: the paper's step from the state, or BDF2's from the predicted end pose.
     sm = bdf2.stage_model(model, pred.gamma) if bdf else model
     start = bdf2.stage_state(state, pred) if bdf else state
@@ -87,11 +92,10 @@ def _step_once(
         lam, vel, iters, residual, used = solve(sm, start, rows, resp, vel_free)
     except ValueError as exc:
         raise SimulationError(str(exc), state.step, state.time, None) from None
-    if bdf:
+    if bdf:  # vel becomes v[t+1] = δv + ṽ, what the monitor checks
         pos, q, vel, omega = bdf2.integrate_stage(model, pred, vel)
-        check_state(model, state.step, state.time, state.body_pos, state.body_quat, vel)
-    else:
-        check_state(model, state.step, state.time, state.body_pos, state.body_quat, vel)
+    check_state(model, state.step, state.time, state.body_pos, state.body_quat, vel)
+    if not bdf:
         pos, q, omega = integrate_pose(model, state, vel, body_rot)
     pos[asleep], q[asleep], omega[asleep] = state.body_pos[asleep], state.body_quat[asleep], 0.0
     pos, q = project_joints(model, pos, q, asleep=asleep)
@@ -109,7 +113,6 @@ def _step_once(
         )  # fmt: skip
     order = np.argsort(rows.key, kind="stable")
     now = dict(body_pos=pos, body_quat=q, body_vel=lin, body_omega=omega, **rheo)
-    kept = state.joint_yielded == rheo["joint_yielded"]
     new = replace(
         state,
         time=state.time + h,
@@ -119,7 +122,7 @@ def _step_once(
         body_asleep=asleep,
         body_still=still,
         **now,
-        **(bdf2.history(state, h, load, now, kept) if bdf else {}),
+        **(bdf2.history(state, h, history[0], now) if bdf else {}),
     )
     grip_force, grip_torque = coupling_wrench(rows, lam)
     report = StepReport(

@@ -41,16 +41,16 @@ from scipy.spatial.transform import Rotation
 from puppetcli.bench import mjcf
 from puppetcli.bench import truth as ode
 from puppetcli.bench.peers import quiet
+from puppetcli.bench.scenes import RIGS
 from puppetcli.rig.load import load_rig
 from puppetcli.spidar.pointer import min_jerk
+from solver import quat
 from solver.engine import Engine
 from solver.model import Model, build_model
-from solver.observe import points_on_bones
+from solver.observe import points_on_bones, relative_rotations
 from solver.rows.grip import Coupling, Pointer
 from solver.spec import LimitSpec, RheologySpec
 from solver.state import State, StepInput, initial_state
-
-from .scenes import RIGS
 
 SCENES = ("chain-bent", "chain-hanging", "doll-bent", "doll-pull")
 DURATION, SAMPLE = 1.0, 0.04  # s: every step below divides SAMPLE
@@ -204,7 +204,7 @@ def _truth_key(sc: Scene, samples: Samples) -> str:
 def _coupling(sc: Scene) -> Coupling:
     p = sc.pull
     return Coupling(
-        p.body, p.point, np.zeros(3), np.array([1.0, 0.0, 0.0, 0.0]), p.stiffness, p.damping,
+        p.body, p.point, np.zeros(3), quat.IDENTITY, p.stiffness, p.damping,
         0.0, 0.0, math.inf, math.inf, position_only=True,
     )  # fmt: skip
 
@@ -213,7 +213,7 @@ def our_inputs(sc: Scene, h: float, steps: int) -> list[StepInput | None]:
     """Each step's input: the pointer's pose and velocity at the step's end."""
     if sc.pull is None:
         return [None] * steps
-    coupling, ident = _coupling(sc), np.array([1.0, 0.0, 0.0, 0.0])
+    coupling, ident = _coupling(sc), quat.IDENTITY
     out = []
     for k in range(1, steps + 1):
         pos, vel = sc.pull.target(k * h)
@@ -279,13 +279,10 @@ def _peer(sc: Scene, h: float, integrator: str) -> mjcf.Peer:
         grip = mjcf.PeerGrip(p.body, p.point, start, p.stiffness, p.damping)
     peer = mjcf.build_peer(sc.model, h, integrator, grip)
     m, d, model = peer.mj_model, peer.mj_data, sc.model
+    q_rel = relative_rotations(model, sc.start.body_quat)  # a ball joint's qpos (mjcf.py)
     for j in range(model.njoint):
         adr = m.jnt_qposadr[m.joint(model.joint_names[j]).id]
-        parent = sc.start.body_quat[model.joint_parent[j]]
-        rel = Rotation.from_quat(parent, scalar_first=True).inv() * Rotation.from_quat(
-            sc.start.body_quat[model.joint_bone[j]], scalar_first=True
-        )
-        d.qpos[adr : adr + 4] = rel.as_quat(scalar_first=True)
+        d.qpos[adr : adr + 4] = q_rel[j]
     mujoco.mj_forward(m, d)
     return peer
 

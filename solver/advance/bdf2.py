@@ -50,6 +50,7 @@ from solver import quat
 from solver.advance.bdf2_kernel import R_MAX, load_mark, mark
 from solver.compiled.layout import Coupling
 from solver.model import Model, kept_with
+from solver.rows.grip import coupling_vector
 from solver.rows.grip_kernel import MODE_GRIP, MODE_NONE, MODE_TOUCH
 from solver.state import State, StepInput
 
@@ -86,10 +87,7 @@ def load(inp: StepInput, nb: int) -> float:
     if ptr is not None and (cpl is not None or ptr.radius > 0.0):
         mode = MODE_TOUCH
         if cpl is not None:
-            mode, body = MODE_GRIP, cpl.body
-            gains = (cpl.stiffness, cpl.damping, cpl.rot_stiffness, cpl.rot_damping,
-                     cpl.force_limit, cpl.torque_limit)  # fmt: skip
-            cvec = np.concatenate((cpl.anchor, cpl.offset, cpl.rest, gains), dtype=np.float64)
+            mode, body, cvec = MODE_GRIP, cpl.body, coupling_vector(cpl)
     force = np.zeros((nb, 3)) if inp.body_force is None else np.asarray(inp.body_force, float)
     torque = np.zeros((nb, 3)) if inp.body_torque is None else np.asarray(inp.body_torque, float)
     has = (inp.body_force is not None, inp.body_torque is not None)
@@ -112,14 +110,11 @@ def ratio(state: State, h: float, load: float) -> float:
     return r if now == state.prev_mark else 0.0
 
 
-def restarts(model: Model, state: State, inp: StepInput) -> bool:
-    """True when a BDF2 step of ``model`` from ``state`` with ``inp`` has no usable history
-    and is taken in ``RESTART``'s parts (not by a model that never subdivides:
-    max_substeps = 1, as every part's)."""
-    o = model.options
-    if o.integrator != "bdf2" or o.max_substeps <= 1:
-        return False
-    return ratio(state, o.h, load(inp, model.nbody)) == 0.0
+def restarts(model: Model, r: float) -> bool:
+    """True when a BDF2 step at step ratio r has no usable history (r = 0) and is taken in
+    ``RESTART``'s parts (not by a model that never subdivides: max_substeps = 1, as every
+    part's)."""
+    return r == 0.0 and model.options.max_substeps > 1
 
 
 def stage_length(h: float, r: float) -> float:
@@ -134,16 +129,23 @@ def _momentum(model: Model, q: np.ndarray, omega: np.ndarray) -> np.ndarray:
 
 
 def predict(model: Model, state: State, r: float) -> Prediction:
-    """The stage of a step h = model.options.h from ``state`` at step ratio r (> 0)."""
+    """The stage of a step h = model.options.h from ``state`` at step ratio r: BDF2 for
+    r > 0 (``ratio``), backward Euler linearised at x + h v for r = 0 (the history unread:
+    the state stands in for its previous step, every difference zero)."""
     h = model.options.h
     c = r * r / (1.0 + 2.0 * r)
     gamma = stage_length(h, r)
-    pos_hat = state.body_pos + c * (state.body_pos - state.prev_pos)
-    turn = quat.log(quat.mul(state.body_quat, quat.conj(state.prev_quat)))
+    s = state
+    p_pos, p_quat, p_vel, p_omega, p_q_sf = (
+        (s.prev_pos, s.prev_quat, s.prev_vel, s.prev_omega, s.prev_q_sf) if r > 0.0
+        else (s.body_pos, s.body_quat, s.body_vel, s.body_omega, s.joint_q_sf)
+    )  # fmt: skip
+    pos_hat = state.body_pos + c * (state.body_pos - p_pos)
+    turn = quat.log(quat.mul(state.body_quat, quat.conj(p_quat)))
     q_hat = quat.normalize(quat.mul(quat.exp(c * turn), state.body_quat))
-    vel_hat = state.body_vel + c * (state.body_vel - state.prev_vel)
+    vel_hat = state.body_vel + c * (state.body_vel - p_vel)
     mom = _momentum(model, state.body_quat, state.body_omega)
-    mom_hat = mom + c * (mom - _momentum(model, state.prev_quat, state.prev_omega))
+    mom_hat = mom + c * (mom - _momentum(model, p_quat, p_omega))
     v_tilde, w_tilde = state.body_vel, state.body_omega
     pos = pos_hat + gamma * v_tilde
     q = quat.normalize(quat.mul(quat.exp(gamma * w_tilde), q_hat))
@@ -151,16 +153,17 @@ def predict(model: Model, state: State, r: float) -> Prediction:
     inv_w = rot @ model.body_inv_inertia @ np.swapaxes(rot, 1, 2)
     w_hat = np.einsum("nij,nj->ni", inv_w, mom_hat)
     start = np.concatenate((vel_hat - v_tilde, w_hat - w_tilde), axis=1)
-    q_sf = state.joint_q_sf + c * (state.joint_q_sf - state.prev_q_sf)
+    q_sf = state.joint_q_sf + c * (state.joint_q_sf - p_q_sf)
     return Prediction(gamma, pos, q, start, np.concatenate((v_tilde, w_tilde), axis=1), q_sf)
 
 
-def history(state: State, h: float, load: float, new: dict, q_sf_kept: np.ndarray) -> dict:
+def history(state: State, h: float, load: float, new: dict) -> dict:
     """The history fields of the State after a step h with an input of fingerprint
-    ``load`` from ``state``: ``new`` holds the
-    new body_pos, body_quat, body_vel, body_omega and joint_q_sf; q_sf_kept (nj,) bool:
-    joints whose q_sf may be extrapolated (no yield switch this step)."""
-    prev_q_sf = np.where(q_sf_kept[:, None], state.joint_q_sf, new["joint_q_sf"])
+    ``load`` from ``state``: ``new`` holds the new body_pos, body_quat, body_vel,
+    body_omega, joint_q_sf and joint_yielded; a joint that switched between flowing and
+    elastic keeps no q_sf history."""
+    kept = state.joint_yielded == new["joint_yielded"]
+    prev_q_sf = np.where(kept[:, None], state.joint_q_sf, new["joint_q_sf"])
     fingerprint = mark(
         new["body_pos"], new["body_quat"], new["body_vel"], new["body_omega"], new["joint_q_sf"]
     )
@@ -174,22 +177,6 @@ def history(state: State, h: float, load: float, new: dict, q_sf_kept: np.ndarra
         prev_mark=fingerprint,
         prev_load=load,
     )
-
-
-def prediction(model: Model, state: State, load: float) -> Prediction:
-    """The stage of the step h = model.options.h from ``state`` with an input of
-    fingerprint ``load``: BDF2 when the state carries a usable history (``ratio``), else
-    backward Euler linearised at x + h v."""
-    r = ratio(state, model.options.h, load)
-    return predict(model, state if r > 0.0 else _no_history(state), r)
-
-
-def _no_history(state: State) -> State:
-    """The state as its own previous step (every difference zero)."""
-    return replace(
-        state, prev_pos=state.body_pos, prev_quat=state.body_quat, prev_vel=state.body_vel,
-        prev_omega=state.body_omega, prev_q_sf=state.joint_q_sf,
-    )  # fmt: skip
 
 
 _STAGE_MODELS: dict[tuple[int, float], Model] = {}

@@ -3,8 +3,6 @@ prediction, the stage's integration and the history the new state keeps."""
 
 from __future__ import annotations
 
-import math
-
 from solver.compiled.layout import Opt
 from solver.jit import kernel
 from solver.kin_kernel import (
@@ -24,7 +22,6 @@ from solver.kin_kernel import (
     vec,
 )
 
-GOLDEN = (math.sqrt(5.0) - 1.0) / 2.0
 R_MAX = 2.0
 """Largest step ratio h/h_prev taken as BDF2 (variable-step BDF2 is zero-stable below
 1 + √2); a larger one (the first step after substeps) restarts with backward Euler."""
@@ -32,20 +29,19 @@ R_MAX = 2.0
 
 @kernel(error_model="numpy")
 def _weigh(a, k, total):
-    """Σ w_k a_k over a 2-D array's entries in order, from index k: (total, next k)."""
+    """Σ (k + 1) a_k over a 2-D array's entries in order, from index k: (total, next k)."""
     for i in range(a.shape[0]):
         for j in range(a.shape[1]):
-            x = k * GOLDEN
-            total += (1.0 + (x - math.floor(x))) * a[i, j]
             k += 1
+            total += k * a[i, j]
     return total, k
 
 
 @kernel(error_model="numpy")
 def mark(pos, q, vel, omega, q_sf):
-    """A fingerprint of a state's arrays: Σ_k w_k·a_k over them all in order, w_k =
-    1 + frac(k·φ) (solver.advance.bdf2.mark: the numpy step calls this one too, so a
-    state either step made matches in the other)."""
+    """A fingerprint of a state's arrays: Σ_k (k + 1)·a_k over them all in order, which a
+    changed entry, two different entries swapped or a uniform shift changes (the numpy step
+    calls this one too, so a state either step made matches in the other)."""
     total, k = _weigh(pos, 0, 0.0)
     total, k = _weigh(q, k, total)
     total, k = _weigh(vel, k, total)
@@ -59,14 +55,14 @@ def load_mark(force, torque, has_force, has_torque, mode, body, cvec):
     """A fingerprint of a step's input: its loads (those given), the pointer's mode, the
     gripped body and the coupling (layout.Coupling; zeros without one).  A step whose
     input's fingerprint differs from the last step's restarts (solver.advance.bdf2)."""
-    total, k = 0.0, 0
+    total = 0.0
     if has_force:
-        total, k = _weigh(force, k, total)
+        total, _ = _weigh(force, 0, total)
     if has_torque:
-        total, k = _weigh(torque, k + force.size, total)
+        total, _ = _weigh(torque, force.size, total)
+    k = force.size + torque.size
     for i in range(len(cvec)):
-        x = (k + i) * GOLDEN
-        total += (1.0 + (x - math.floor(x))) * cvec[i]
+        total += (k + i + 1) * cvec[i]
     return total + 1000.0 * mode + body
 
 

@@ -43,6 +43,7 @@ from solver.compiled.layout import (
 )
 from solver.compiled.pack import FastModel
 from solver.pipeline import step
+from solver.rows.grip import coupling_vector
 from solver.rows.grip_kernel import MODE_GRIP, MODE_NONE, MODE_TOUCH
 from solver.rows.pin import with_pins
 from solver.solve.dispatch_kernel import RESTART, SUBSTEP
@@ -153,7 +154,7 @@ def _input_arrays(fm: FastModel, inp: StepInput) -> tuple | None:
         mode = MODE_TOUCH
     if mode == MODE_TOUCH and cpl is not None:  # a pointer that grips
         if cpl is not fm.coupling[0]:  # checked once per Coupling (frozen)
-            cvec = _coupling_vec(cpl)
+            cvec = coupling_vector(cpl)
             if not 0 <= cpl.body < nb or cvec.shape != (16,):
                 return None
             fm.coupling = (cpl, cvec, (MODE_GRIP, cpl.body, bool(cpl.position_only)))
@@ -186,13 +187,6 @@ def _pin_arrays(fm: FastModel, pins: tuple, nb: int) -> tuple | None:
         return None
     fm.pin_cache = (pins, (rows, bones))
     return fm.pin_cache[1]
-
-
-def _coupling_vec(cpl) -> np.ndarray:
-    """The coupling's vector (layout.Coupling: the fields of the same names, in order)."""
-    gains = (cpl.stiffness, cpl.damping, cpl.rot_stiffness, cpl.rot_damping,
-             cpl.force_limit, cpl.torque_limit)  # fmt: skip
-    return np.concatenate((cpl.anchor, cpl.offset, cpl.rest, gains), dtype=_F8)
 
 
 def entry_point(dispatcher):

@@ -87,6 +87,14 @@ def make_coupling(
     return Coupling(body=body, anchor=anchor, offset=offset, rest=rest, **gains)
 
 
+def coupling_vector(c: Coupling) -> np.ndarray:
+    """The coupling as the compiled step's vector (solver.compiled.layout.Coupling: the
+    fields of the same names, in order)."""
+    gains = (c.stiffness, c.damping, c.rot_stiffness, c.rot_damping, c.force_limit,
+             c.torque_limit)  # fmt: skip
+    return np.concatenate((c.anchor, c.offset, c.rest, gains), dtype=np.float64)
+
+
 def coupling_rows(state: State, pointer: Pointer, c: Coupling, h: float) -> Rows:
     """Translation rows (and rotation rows unless position-only) of a grip."""
     b = c.body
