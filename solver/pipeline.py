@@ -21,6 +21,7 @@ import numpy as np
 
 from solver import quat
 from solver.advance import bdf2
+from solver.advance.bdf2_kernel import RESTART
 from solver.advance.integrate import free_velocity, integrate_pose
 from solver.advance.monitor import check_state
 from solver.advance.rheology import rheology_update
@@ -54,7 +55,7 @@ def step(model: Model, state: State, inp: StepInput | None = None) -> tuple[Stat
         load = bdf2.load(inp, model.nbody)
         history = (load, bdf2.ratio(state, model.options.h, load))
         if bdf2.restarts(model, history[1]):
-            return run_parts(model, state, inp, bdf2.RESTART, partial(_part, model))
+            return run_parts(model, state, inp, RESTART, partial(_part, model))
     return _step_once(model, state, inp, body_rot, history)
 
 

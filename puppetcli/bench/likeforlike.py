@@ -55,7 +55,7 @@ from solver.state import State, StepInput, initial_state
 SCENES = ("chain-bent", "chain-hanging", "doll-bent", "doll-pull")
 DURATION, SAMPLE = 1.0, 0.04  # s: every step below divides SAMPLE
 STEPS = (0.0005, 0.001, 0.002, 0.004, 0.005, 0.01, 0.02, 0.04)
-LARGE_STEPS = (0.05, 0.1, 0.2, 0.25)
+LARGE_STEPS = (0.02, 0.04, 0.05, 0.1, 0.2, 0.25)
 OURS = ("bdf2", "euler")
 PEERS = ("Euler", "implicitfast", "RK4")
 PULL = dict(bone="forearm_l", delta=np.array([0.0, 0.15, 0.15]), duration=0.5,
@@ -156,7 +156,7 @@ class Samples:
 
 
 SMALL, LARGE = Samples(), Samples(1.0, 2.0)
-"""The study's samples (steps up to 40 ms), and the large steps' (50–250 ms)."""
+"""The study's samples (steps up to 40 ms), and the large steps' (20–250 ms, all on one window)."""
 
 
 @cache
@@ -224,7 +224,8 @@ def our_inputs(sc: Scene, h: float, steps: int) -> list[StepInput | None]:
 @dataclass(frozen=True)
 class Run:
     """One engine's run of a scene at one step: errors (m), seconds of stepping per
-    simulated second, and a note (empty, or why it has no result)."""
+    simulated second, a note (empty, or why it has no result), and the solver steps per
+    simulated second (ours: each part of a subdivided step counts; MuJoCo's: 1/h)."""
 
     scene: str
     engine: str
@@ -233,6 +234,7 @@ class Run:
     worst: float
     cost: float
     note: str = ""
+    steps: float = math.nan
 
 
 def _errors(tails: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
@@ -243,9 +245,15 @@ def _errors(tails: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
 
 
 def run_ours(
-    name: str, integrator: str, h: float, repeats: int = 3, samples: Samples = SMALL
+    name: str,
+    integrator: str,
+    h: float,
+    repeats: int = 3,
+    samples: Samples = SMALL,
+    count_parts: bool = False,
 ) -> Run:
-    """Our compiled stepper on scene ``name`` at step h with ``integrator``."""
+    """Our compiled stepper on scene ``name`` at step h with ``integrator`` (with
+    ``count_parts``, Run.steps too)."""
     sc = scene(name)
     model = sc.model.with_options(h=h, integrator=integrator)
     steps, every = round(samples.until / h), round(samples.every / h)
@@ -266,7 +274,18 @@ def run_ours(
             return Run(name, integrator, h, math.inf, math.inf, math.inf, str(exc).split(":")[0])
         best = min(best, wall)
     rms, worst = _errors(np.array(tails), true_tails(name, samples))
-    return Run(name, integrator, h, rms, worst, best / samples.until)
+    parts = _parts(engine, sc.start, inputs) if count_parts else math.nan
+    return Run(name, integrator, h, rms, worst, best / samples.until, "", parts / samples.until)
+
+
+def _parts(engine: Engine, start: State, inputs: list) -> int:
+    """The solver steps a run takes, each part of a subdivided step counted (an untimed
+    run of its own: reading it every step would cost the timed loop ~1 %)."""
+    sim, parts = engine.stepper(start), 0
+    for inp in inputs:
+        sim.advance(inp)
+        parts += sim.substeps
+    return parts
 
 
 def _peer(sc: Scene, h: float, integrator: str) -> mjcf.Peer:
@@ -317,7 +336,7 @@ def run_peer(
         best = min(best, wall)
     rms, worst = _errors(np.array(tails), true_tails(name, samples))
     note = "" if math.isfinite(rms) and rms < 1.0 else "diverged"
-    return Run(name, f"MuJoCo {integrator}", h, rms, worst, best / samples.until, note)
+    return Run(name, f"MuJoCo {integrator}", h, rms, worst, best / samples.until, note, 1.0 / h)
 
 
 def study(names=SCENES, steps=STEPS, peers: bool = True, repeats: int = 3) -> list[Run]:
@@ -333,7 +352,7 @@ def study(names=SCENES, steps=STEPS, peers: bool = True, repeats: int = 3) -> li
 
 def large_steps(names=SCENES, steps=LARGE_STEPS) -> list[Run]:
     """Ours at the large steps (errors at t = 1 and 2 s)."""
-    return [run_ours(n, i, h, 2, LARGE) for n in names for h in steps for i in OURS]
+    return [run_ours(n, i, h, 3, LARGE, True) for n in names for h in steps for i in OURS]
 
 
 LEVELS = (3e-3, 1e-3, 3e-4, 1e-4)
@@ -381,16 +400,19 @@ def equal_time(runs: list[Run], levels=LEVELS) -> list[EqualTime]:
 
 
 def format_runs(runs: list[Run]) -> str:
-    """RMS error (mm) and cost (ms per simulated s) per scene, step and engine."""
+    """RMS error (mm) and cost (ms per simulated s) per scene, step and engine, and the
+    solver steps per simulated second where they were counted."""
     engines = list(dict.fromkeys(r.engine for r in runs))
-    lines = ["RMS tail error, mm / stepping time, ms per simulated second"]
+    counted = any(math.isfinite(r.steps) for r in runs)
+    head = "RMS tail error, mm / stepping time, ms per simulated second"
+    lines = [head + (" / solver steps per simulated second" if counted else "")]
     for name in dict.fromkeys(r.scene for r in runs):
         lines += ["", f"{name}:", "h ms     " + "".join(f"{e:>26}" for e in engines)]
         for h in sorted({r.h for r in runs if r.scene == name}):
             cells = []
             for e in engines:
                 got = [r for r in runs if r.scene == name and r.engine == e and r.h == h]
-                cells.append(f"{_cell(got[0]) if got else '':>26}")
+                cells.append(f" {_cell(got[0]) if got else '':>25}")
             lines.append(f"{h * 1e3:<9g}" + "".join(cells))
     return "\n".join(lines)
 
@@ -398,7 +420,8 @@ def format_runs(runs: list[Run]) -> str:
 def _cell(r: Run) -> str:
     if not math.isfinite(r.rms) or r.note:
         return r.note or "no answer"
-    return f"{r.rms * 1e3:.3g} / {r.cost * 1e3:.3g}"
+    steps = f" / {r.steps:.3g}" if math.isfinite(r.steps) else ""
+    return f"{r.rms * 1e3:.3g} / {r.cost * 1e3:.3g}{steps}"
 
 
 def format_equal_time(table: list[EqualTime]) -> str:
@@ -417,7 +440,8 @@ def format_equal_time(table: list[EqualTime]) -> str:
 
 
 def csv_text(runs: list[Run]) -> str:
-    lines = ["scene,engine,h_s,rms_m,max_m,seconds_per_simulated_second,note"]
-    lines += [f"{r.scene},{r.engine},{r.h!r},{r.rms!r},{r.worst!r},{r.cost!r},{r.note}"
+    lines = ["scene,engine,h_s,rms_m,max_m,seconds_per_simulated_second,note,"
+             "steps_per_simulated_second"]  # fmt: skip
+    lines += [f"{r.scene},{r.engine},{r.h!r},{r.rms!r},{r.worst!r},{r.cost!r},{r.note},{r.steps!r}"
               for r in runs]  # fmt: skip
     return "\n".join(lines) + "\n"

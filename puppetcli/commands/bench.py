@@ -85,7 +85,7 @@ SOLVER_CHOICES = [*SOLVERS, "reference"]
     is_flag=True,
     help="Measure error against run time on like-for-like scenes instead: ours (bdf2 and "
     "the paper's euler) and MuJoCo (Euler, implicitfast, RK4; needs the bench extra) "
-    "against a DOP853 truth, an equal-time table, and our large steps (50–250 ms).",
+    "against a DOP853 truth, an equal-time table, and our large steps (20–250 ms).",
 )
 @click.option(
     "--skips",

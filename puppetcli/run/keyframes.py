@@ -11,7 +11,8 @@
 ``head`` is the bone head in the Y-up world (m); ``rotation`` the bone's world
 rotation relative to its rest orientation; ``local`` its joint rotation relative
 to rest, in the parent's frame (the root's local equals its rotation).
-Quaternions are unit, scalar first.  Keys are strictly increasing in time and
+Quaternions are unit, scalar first, with w ≥ 0 (a file with w < 0 reads as the same
+rotation, negated).  Keys are strictly increasing in time and
 every key holds the same bones.  Floats are written with ``repr`` precision, so
 a read gives back the written values bit for bit; NaN is never written.
 """
@@ -53,7 +54,8 @@ class KeyframesError(PuppetError):
 
 @dataclass(eq=False)
 class BonePose:
-    """One bone in a key: head (3,) m world; rotation, local (4,) unit (w, x, y, z) from rest."""
+    """One bone in a key: head (3,) m world; rotation, local (4,) unit (w, x, y, z) from rest,
+    kept with w ≥ 0 (a quaternion given with w < 0 is negated: the same rotation)."""
 
     head: np.ndarray
     rotation: np.ndarray
@@ -65,6 +67,8 @@ class BonePose:
             value = np.array(getattr(self, name), dtype=float)
             if value.shape != (n,):
                 raise ValueError(f"BonePose.{name} has shape {value.shape}, expected ({n},)")
+            if n == 4 and value[0] < 0.0:  # q and −q are one rotation: kept with w ≥ 0
+                value = -value
             setattr(self, name, value)
 
     def __eq__(self, other: object) -> bool:
@@ -121,6 +125,8 @@ def _key_json(index: int, key: Keyframe, bone_names: list[str] | None) -> dict:
     where = f"key {index} (t = {key.time!r} s)"
     if not math.isfinite(key.time):
         raise ValueError(f"{where}: time is not finite")
+    if abs(key.time) > LARGEST:  # what read_keyframes would refuse
+        raise ValueError(f"{where}: time is beyond ±{LARGEST:g} s")
     clash = [name for name in _RESERVED if name in key.extra]
     if clash:
         raise ValueError(f"{where}: extra field {clash[0]!r} is reserved")
@@ -132,6 +138,8 @@ def _key_json(index: int, key: Keyframe, bone_names: list[str] | None) -> dict:
             value = getattr(pose, field_name)
             if not np.all(np.isfinite(value)):
                 raise ValueError(f"{where}: bone {name!r} {field_name} is not finite")
+            if not np.all(np.abs(value) <= LARGEST):
+                raise ValueError(f"{where}: bone {name!r} {field_name} is beyond ±{LARGEST:g}")
             if n == 4 and abs(np.linalg.norm(value) - 1.0) > UNIT_TOLERANCE:
                 raise ValueError(f"{where}: bone {name!r} {field_name} is not a unit quaternion")
         bones[name] = {f: getattr(pose, f).tolist() for f, _ in _VECTORS}
@@ -141,8 +149,9 @@ def _key_json(index: int, key: Keyframe, bone_names: list[str] | None) -> dict:
 def write_keyframes(path: Path, rig_name: str, keys: Iterable[Keyframe]) -> None:
     """Write keyframes.json atomically; keys must be strictly increasing in time.
 
-    Non-finite values, non-unit quaternions, differing bone sets and extra fields
-    named like the reserved ones raise ``ValueError`` before anything is written.
+    Non-finite values, numbers beyond ±1e9 (yamldoc.LARGEST, which the reader refuses),
+    non-unit quaternions, differing bone sets and extra fields named like the reserved
+    ones raise ``ValueError`` before anything is written.
     """
     out: list[dict] = []
     bone_names: list[str] | None = None

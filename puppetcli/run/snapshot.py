@@ -35,13 +35,8 @@ def capture(model: Model, state: State, label: str, extra: dict) -> Keyframe:
     local = rotation.copy()
     local[model.joint_bone] = relative_rotations(model, state.body_quat)
     bones = {
-        name: BonePose(head=heads[i], rotation=_canonical(rotation[i]), local=_canonical(local[i]))
+        name: BonePose(head=heads[i], rotation=rotation[i], local=local[i])
         for i, name in enumerate(model.bone_names)
     }
     # The step grid's time, not the sum of the steps' floats: 2.0, not 1.9999999999999793.
     return Keyframe(time=round(state.time, 9), label=label, bones=bones, extra=extra)
-
-
-def _canonical(q: np.ndarray) -> np.ndarray:
-    """The quaternion with w ≥ 0 (q and −q are the same rotation)."""
-    return -q if q[0] < 0.0 else q.copy()

@@ -54,13 +54,6 @@ from solver.rows.grip import coupling_vector
 from solver.rows.grip_kernel import MODE_GRIP, MODE_NONE, MODE_TOUCH
 from solver.state import State, StepInput
 
-RESTART = (4, 4, 2)
-"""A restart's parts (h/4, h/4, h/2: solver.advance.substep.run_parts): backward Euler over
-h/4, then BDF2 at r = 1 and r = 2; the next step goes on at r = 2.  A step without a usable
-history (the first of a run, the first after its input jumped) is backward Euler, whose
-local error where the acceleration jumps by Δa, ~½h²·Δa, stays in every later state; over
-h/4 it is 1/16 of that (tests/solver/test_bdf2.py measures what it leaves)."""
-
 
 @dataclass(frozen=True)
 class Prediction:

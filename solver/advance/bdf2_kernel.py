@@ -27,6 +27,14 @@ R_MAX = 2.0
 1 + √2); a larger one (the first step after substeps) restarts with backward Euler."""
 
 
+RESTART = (4, 4, 2)
+"""A restart's parts (h/4, h/4, h/2: solver.advance.substep.run_parts): backward Euler over
+h/4, then BDF2 at r = 1 and r = 2; the next step goes on at r = 2.  A step without a usable
+history (the first of a run, the first after its input jumped) is backward Euler, whose
+local error where the acceleration jumps by Δa, ~½h²·Δa, stays in every later state; over
+h/4 it is 1/16 of that (tests/solver/test_bdf2.py measures what it leaves)."""
+
+
 @kernel(error_model="numpy")
 def _weigh(a, k, total):
     """Σ (k + 1) a_k over a 2-D array's entries in order, from index k: (total, next k)."""

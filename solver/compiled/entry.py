@@ -21,37 +21,30 @@ step it hands back).
 
 from __future__ import annotations
 
-from solver.compiled.kernel import _step, step_kernel
-from solver.compiled.layout import ReportInt, SimArrays, StateSet, StepState, leaf_count, leaf_of
+from solver.compiled.kernel import _step, step_kernel, step_parts, step_state
+from solver.compiled.layout import SimArrays, StateSet, leaf_count, leaf_of
 from solver.compiled.views import leaf_f, leaf_i, state_set_view, step_work_view, warm_view
 from solver.jit import kernel
-from solver.solve.dispatch_kernel import OK
+from solver.solve.dispatch_kernel import OK, RESTART, SUBSTEP
 
 _SET0 = leaf_of(SimArrays, "set0")
 _NSET = leaf_count(StateSet)
 _WARM, _WORK = leaf_of(SimArrays, "warm"), leaf_of(SimArrays, "work")
 _REP_I, _REP_F = leaf_of(SimArrays, "rep_i"), leaf_of(SimArrays, "rep_f")
+_SPARE = leaf_of(SimArrays, "spare")
+_SPARE_KEYS, _SPARE_LAM = leaf_of(SimArrays, "spare_keys"), leaf_of(SimArrays, "spare_lam")
 
 
 @kernel(error_model="numpy")
 def fast_kernel(flat, prev, keys, lam, inp, out, rep_i, rep_f):
     """One step from prev (a previous out, τ unread) and its warm keys and λ into out
     (module docstring); rep_i and rep_f (layout.ReportInt, ReportFloat) receive the
-    report.  Returns (status, warm keys (n,), warm λ (n,)); on SUBSTEP rep_i's rows entry
-    is the number of substeps asked for, on any status but OK out holds nothing."""
-    st = _with_warm(prev, keys, lam)
+    report.  Returns (status, warm keys (n,), warm λ (n,)); a step the joints' tension
+    subdivides, or a BDF2 restart, is taken in its parts (kernel.step_parts); on any
+    status but OK out holds nothing."""
+    st = step_state(prev, keys, lam)
     status, _, new_keys, new_lam, _, _ = step_kernel(flat, st, inp, out, rep_i, rep_f)
     return status, new_keys, new_lam
-
-
-@kernel(error_model="numpy", inline="always")
-def _with_warm(prev, keys, lam):
-    """The step's st (layout.StepState): prev's fields (τ is not read) with the warm keys
-    and λ."""
-    return StepState(prev.x, prev.q, prev.v, prev.omega, prev.q_sf, prev.yielded, prev.anchor,
-                     prev.torque_avg, keys, lam, prev.asleep, prev.still, prev.prev_x,
-                     prev.prev_q, prev.prev_v, prev.prev_omega, prev.prev_q_sf,
-                     prev.hist)  # fmt: skip
 
 
 @kernel(error_model="numpy", _nrt=False)
@@ -59,8 +52,9 @@ def inplace_kernel(flat, phase, inp):
     """``fast_kernel`` on a Sim's arrays, the flat buffers of layout.SimArrays (the model's
     leaves first, so they are also the model's flat): reads state set ``phase`` (0 or
     1), writes the other (the Sim then flips phase), replaces the warm keys and λ, fills
-    rep_i and rep_f.  Returns (status, substeps asked for); on a status other than OK
-    ``phase`` and the warm keys are as they were.  It runs kernel._step on the Sim's
+    rep_i and rep_f.  Returns the status; on a status other than OK ``phase`` and the
+    warm keys are as they were (a step in parts, kernel.step_parts, writes the other set
+    and the spare one in turn, never the one it reads).  It runs kernel._step on the Sim's
     scratch arrays: outside the substep test and sleeping a Sim's step allocates nothing
     and counts no references (compiled without: ``_nrt=False``, which also unboxes its
     arguments without making numba's wrappers for them)."""
@@ -70,11 +64,16 @@ def inplace_kernel(flat, phase, inp):
     rep_i, rep_f = leaf_i(flat, _REP_I), leaf_f(flat, _REP_F)
     work = step_work_view(flat, _WORK)
     nw = warm.n[0]
-    st = _with_warm(prev, warm.keys[:nw], warm.lam[:nw])
-    status, n = _step(flat, st, inp, out, rep_i, rep_f, work.scratch, work.keys, work.lam)
+    st = step_state(prev, warm.keys[:nw], warm.lam[:nw])
+    status, n = _step(flat, st, inp, out, rep_i, rep_f, work.scratch, work.keys, work.lam, 0)
+    if status in (SUBSTEP, RESTART):
+        spare = state_set_view(flat, _SPARE)
+        spare_keys, spare_lam = leaf_i(flat, _SPARE_KEYS), leaf_f(flat, _SPARE_LAM)
+        status, n = step_parts(flat, st, inp, (out, spare), rep_i, rep_f, work.scratch,
+                               (work.keys, work.lam, spare_keys, spare_lam), status)  # fmt: skip
     if status != OK:
-        return status, rep_i[ReportInt.rows]
+        return status
     for r in range(n):
         warm.keys[r], warm.lam[r] = work.keys[r], work.lam[r]
     warm.n[0] = n
-    return OK, 0
+    return OK

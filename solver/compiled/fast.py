@@ -24,12 +24,9 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import replace
-from functools import partial
 
 import numpy as np
 
-from solver.advance.bdf2 import RESTART as RESTART_PARTS
-from solver.advance.substep import run_parts, run_substeps
 from solver.compiled.entry import fast_kernel
 from solver.compiled.layout import (
     Coupling,
@@ -38,7 +35,6 @@ from solver.compiled.layout import (
     PinVec,
     Pointer,
     ReportFloat,
-    ReportInt,
     StateSet,
 )
 from solver.compiled.pack import FastModel
@@ -46,7 +42,6 @@ from solver.pipeline import step
 from solver.rows.grip import coupling_vector
 from solver.rows.grip_kernel import MODE_GRIP, MODE_NONE, MODE_TOUCH
 from solver.rows.pin import with_pins
-from solver.solve.dispatch_kernel import RESTART, SUBSTEP
 from solver.state import NO_PINS, NO_SLIP, State, StepInput, StepReport
 
 __all__ = ["fast_step", "supports"]
@@ -218,11 +213,6 @@ def new_state_arrays(nb: int, nj: int) -> tuple:
     return _new_tuple(StateSet, arrays)
 
 
-def _part(fm: FastModel, d: int, state: State, inp: StepInput) -> tuple[State, StepReport]:
-    """A step h/d of fm's model (a part of a step: solver.advance.substep.run_parts)."""
-    return fast_step(fm.sub(d), state, inp)
-
-
 def fast_step(
     fm: FastModel, state: State, inp: StepInput | None = None
 ) -> tuple[State, StepReport]:
@@ -241,11 +231,6 @@ def fast_step(
     prev, keys, lam = st
     out, rep_f = new_state_arrays(len(prev.x), len(prev.q_sf)), np.empty(ReportFloat.SIZE)
     status, warm_key, warm_lam = _KERNEL[0](fm.flat, prev, keys, lam, ins, out, fm.rep_i, rep_f)
-    if status == SUBSTEP:
-        n = int(fm.rep_i[ReportInt.rows])  # the substeps asked for
-        return run_substeps(model, state, inp, n, partial(_part, fm))
-    if status == RESTART:
-        return run_parts(model, state, inp, RESTART_PARTS, partial(_part, fm))
     if status:
         return step(model, state, inp)
     time, steps = state.time + model.options.h, state.step + 1
@@ -333,14 +318,14 @@ def history_fields(out: StateSet) -> dict:
 
 
 def kernel_report(rep_i: np.ndarray, rep_f: np.ndarray) -> StepReport:
-    """The StepReport of the kernel's report arrays (rows, contacts, iterations, solver;
-    residual, grip force, grip torque, touch force).  Its vectors are views of rep_f: pass
+    """The StepReport of the kernel's report arrays (rows, contacts, iterations, solver,
+    substeps; residual, grip force, grip torque, touch force).  Its vectors are views of rep_f: pass
     an array of the caller's own."""
-    rows, contacts, iterations, solver = rep_i.tolist()  # layout.ReportInt's order
+    rows, contacts, iterations, solver, substeps = rep_i.tolist()  # layout.ReportInt's order
     values = dict(
         rows=rows, contacts=contacts, iterations=iterations, residual=float(rep_f[_RESIDUAL]),
         solver=SOLVER_NAMES[solver], grip_force=rep_f[GRIP_FORCE], grip_torque=rep_f[GRIP_TORQUE],
-        touch_force=rep_f[TOUCH_FORCE], substeps=1, pin_force=NO_PINS, pin_torque=NO_PINS,
+        touch_force=rep_f[TOUCH_FORCE], substeps=substeps, pin_force=NO_PINS, pin_torque=NO_PINS,
         pin_slip=NO_SLIP,
     )  # fmt: skip
     if not _DIRECT_REPORT:

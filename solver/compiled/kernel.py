@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from solver.advance.bdf2_kernel import RESTART as RESTART_PARTS
 from solver.advance.bdf2_kernel import integrate_stage, load_mark, predict, ratio, remember
 from solver.advance.integrate_kernel import free_velocity, integrate
 from solver.advance.monitor_kernel import gaps_within, state_ok
@@ -39,11 +40,13 @@ from solver.compiled.flat import node_count, row_capacity
 from solver.compiled.layout import (
     Bodies,
     Flags,
+    Input,
     IntegrateScratch,
     IOpt,
     Joints,
     LimitScratch,
     Opt,
+    Pointer,
     Prediction,
     ReportFloat,
     ReportInt,
@@ -53,14 +56,15 @@ from solver.compiled.layout import (
     SolverIndex,
     SolverScratch,
     SolverValues,
+    StateSet,
     StepState,
     WakeScratch,
 )  # fmt: skip
 from solver.compiled.views import packed_view
 from solver.jit import kernel
-from solver.kin_kernel import frames
+from solver.kin_kernel import frames, qexp, qmul, qnormalize
 from solver.rows.build_kernel import build_rows
-from solver.rows.grip_kernel import MODE_TOUCH, is_touch_row
+from solver.rows.grip_kernel import MODE_NONE, MODE_TOUCH, is_touch_row
 from solver.rows.joints_kernel import limit_arrays
 from solver.rows.shift_kernel import shift_rows
 from solver.rows.table import KIND_GRIP
@@ -76,6 +80,7 @@ from solver.solve.dispatch_kernel import (
 from solver.solve.hybrid_kernel import NU_CAP
 
 _OPT_SIZE = int(Opt.SIZE)
+_POINTER_SIZE, _REPORT_SIZE = int(Pointer.SIZE), int(ReportFloat.SIZE)
 
 
 @kernel(error_model="numpy", _nrt=False)
@@ -110,7 +115,12 @@ def step_kernel(flat, st, inp, out, rep_i, rep_f):
     than hybrid.NU_CAP rows); the solvers work in the step's scratch arrays."""
     nodes = node_count(flat)
     scratch, keys, values = step_arrays(len(st.x), len(st.q_sf), row_capacity(flat), nodes)
-    status, count = _step(flat, st, inp, out, rep_i, rep_f, scratch, keys, values)
+    status, count = _step(flat, st, inp, out, rep_i, rep_f, scratch, keys, values, 0)
+    if status in (SUBSTEP, RESTART):
+        spare = _state_set_like(out)
+        spare_keys, spare_values = np.empty_like(keys), np.empty_like(values)
+        status, count = step_parts(flat, st, inp, (out, spare), rep_i, rep_f, scratch,
+                                   (keys, values, spare_keys, spare_values), status)  # fmt: skip
     if status != OK:
         return _handed_back(status, out, rep_i, rep_f)
     return OK, out, keys[:count], values[:count], rep_i, rep_f
@@ -137,15 +147,17 @@ def step_arrays(nb, nj, rows, nodes):
         WakeScratch(np.empty(nb, b), np.empty(4)), np.empty(rows), np.empty(rows),
         np.empty((nb, 6)), IntegrateScratch(np.empty((nb, 3)), np.empty((nb, 3)), np.empty(nb, b)),
         np.empty((nj, 3)), LimitScratch(np.empty((nj, 3)), np.empty((nj, 3))), np.empty(nj, b),
-        solvers, pred, np.empty((nb, 6)), np.empty(_OPT_SIZE),
+        solvers, pred, np.empty((nb, 6)), np.empty(_OPT_SIZE), np.empty(_OPT_SIZE),
+        np.empty(_POINTER_SIZE), np.empty(_REPORT_SIZE),
     )  # fmt: skip
     return scratch, np.empty(rows, np.int64), np.empty(rows)
 
 
 @kernel(error_model="numpy", _nrt=False)
-def _step(flat, st, inp, out, rep_i, rep_f, scratch, keys, values):
+def _step(flat, st, inp, out, rep_i, rep_f, scratch, keys, values, d):
     """``step_kernel``'s step, the model's packed structures rebuilt from its flat buffers
-    here (solver.compiled.views); returns (status, warm rows in keys/values).  The step's
+    here (solver.compiled.views); returns (status, warm rows in keys/values).  d = 0: a
+    whole step; d > 0: a part of one (``step_parts``), h/d, never subdivided.  The step's
     parts that take those structures are inlined into it (``inline="always"``) or called,
     compiled without reference counting too.  scratch (layout.Scratch): whatever it holds
     on entry (a Sim passes the same arrays every step: ``step_arrays``) is overwritten
@@ -169,11 +181,20 @@ def _step(flat, st, inp, out, rep_i, rep_f, scratch, keys, values):
     rep_f[:] = 0
     prof, on = ws.cycles, iopt[IOpt.profiling]
     t = cycles() if on else 0
-    nsub = substeps_needed(opt[Opt.h], iopt[IOpt.max_substeps], m.joint_parent, m.joint_bone,
-                           m.body_inv_mass, m.joint_levers, st.warm_key, st.warm_lam)  # fmt: skip
-    if nsub > 1:
-        rep_i[ReportInt.rows] = nsub
-        return SUBSTEP, 0
+    whole = d == 0
+    if whole:
+        nsub = substeps_needed(opt[Opt.h], iopt[IOpt.max_substeps], m.joint_parent,
+                               m.joint_bone, m.body_inv_mass, m.joint_levers, st.warm_key,
+                               st.warm_lam)  # fmt: skip
+        if nsub > 1:
+            rep_i[ReportInt.rows] = nsub
+            return SUBSTEP, 0
+    else:  # solver.advance.substep.sub_model's options
+        part_opt = scratch.part_opt
+        for k in range(len(opt)):
+            part_opt[k] = opt[k]
+        part_opt[Opt.h] = opt[Opt.h] / d
+        opt = part_opt
     # The stage: the paper's step from st, or BDF2's from the predicted end pose.
     bdf, pred = iopt[IOpt.bdf2], scratch.pred
     stage, sopt, load = st, opt, 0.0
@@ -182,7 +203,7 @@ def _step(flat, st, inp, out, rep_i, rep_f, scratch, keys, values):
         load = load_mark(inp.force, inp.torque, ivec[Flags.has_force], ivec[Flags.has_torque],
                          ivec[Flags.mode], ivec[Flags.body], inp.coupling)  # fmt: skip
         r = ratio(opt, st, st.hist, load)
-        if r == 0.0 and iopt[IOpt.max_substeps] > 1:
+        if r == 0.0 and whole and iopt[IOpt.max_substeps] > 1:
             return RESTART, 0  # solver.advance.bdf2.RESTART's parts
         stage, sopt = _stage(m, opt, st, r, pred, rot, scratch.stage_opt)
     frames(stage.q, m.body_inertia, m.body_inv_inertia, rot, inertia_w, inv_i)
@@ -271,10 +292,92 @@ def _step(flat, st, inp, out, rep_i, rep_f, scratch, keys, values):
     count = warm_table(rw, n, lam, keys, values)
     rep_i[ReportInt.rows], rep_i[ReportInt.contacts] = count, ncontact
     rep_i[ReportInt.iterations], rep_i[ReportInt.solver] = iters, used
+    rep_i[ReportInt.substeps] = 1
     rep_f[ReportFloat.residual] = residual
     report(rw, n, lam, rep_f)
     tick(prof, on, 7, t)
     return OK, count
+
+
+@kernel(error_model="numpy", _nrt=False)
+def step_parts(flat, st, inp, sets, rep_i, rep_f, scratch, warm, status):
+    """A whole step taken in parts, as solver.advance.substep.run_parts takes it: on
+    SUBSTEP rep_i's rows entry n equal parts h/n, on RESTART the parts RESTART_PARTS; each
+    part ``_step``'s at h/d with the input's pointer at the part's end (moved back along its
+    velocity).  sets: (out, spare) layout.StateSets; warm: (keys, values, spare keys, spare
+    values).  The parts write out and spare in turn, so that the last writes out and
+    keys/values; st is only read.  The report: the last part's rows, contacts and solver,
+    the parts' summed iterations and largest residual, their mean grip and touch forces,
+    and their count as substeps.  Returns (status, warm rows), as ``_step``."""
+    out, spare = sets
+    keys, values, spare_keys, spare_values = warm
+    restart = status == RESTART
+    n = len(RESTART_PARTS) if restart else rep_i[ReportInt.rows]
+    h = packed_view(flat, 0).opt[Opt.h]
+    summed, done, iterations, residual, count = scratch.part_report, 0.0, 0, 0.0, 0
+    summed[:] = 0.0
+    here = st
+    for k in range(n):
+        d = RESTART_PARTS[k] if restart else n
+        done += h / d
+        part = _part_input(inp, max(h - done, 0.0), scratch.part_pointer)
+        last = (n - 1 - k) % 2 == 0
+        target = out if last else spare
+        wk, wv = (keys, values) if last else (spare_keys, spare_values)
+        status, count = _step(flat, here, part, target, rep_i, rep_f, scratch, wk, wv, d)
+        if status != OK:
+            return status, 0
+        iterations += rep_i[ReportInt.iterations]
+        residual = max(residual, rep_f[ReportFloat.residual])
+        for i in range(len(summed)):
+            summed[i] += rep_f[i]
+        here = step_state(target, wk[:count], wv[:count])
+    rep_i[ReportInt.iterations], rep_i[ReportInt.substeps] = iterations, n
+    for i in range(len(summed)):
+        rep_f[i] = summed[i] / n
+    rep_f[ReportFloat.residual] = residual
+    return OK, count
+
+
+@kernel(error_model="numpy", _nrt=False)
+def _part_input(inp, before_end, pointer):
+    """inp with its pointer ``before_end`` seconds before the step's end, moved back along
+    its velocity (solver.advance.substep.pointer_at) into ``pointer``; inp itself when
+    before_end is 0 or no pointer is read."""
+    if before_end == 0.0 or inp.flags[Flags.mode] == MODE_NONE:
+        return inp
+    p = inp.pointer
+    for k in range(len(pointer)):
+        pointer[k] = p[k]
+    for k in range(3):
+        pointer[Pointer.pos + k] = p[Pointer.pos + k] - before_end * p[Pointer.vel + k]
+    w = (-before_end * p[Pointer.omega], -before_end * p[Pointer.omega + 1],
+         -before_end * p[Pointer.omega + 2])  # fmt: skip
+    q = (p[Pointer.quat], p[Pointer.quat + 1], p[Pointer.quat + 2], p[Pointer.quat + 3])
+    moved = qnormalize(qmul(qexp(w), q))
+    for k in range(4):
+        pointer[Pointer.quat + k] = moved[k]
+    return Input(inp.force, inp.torque, pointer, inp.coupling, inp.flags, inp.pins, inp.pin_bone)
+
+
+@kernel(error_model="numpy", inline="always")
+def step_state(prev, keys, lam):
+    """The step's st (layout.StepState): a StateSet's fields (τ is not read) with the warm
+    keys and λ."""
+    return StepState(prev.x, prev.q, prev.v, prev.omega, prev.q_sf, prev.yielded, prev.anchor,
+                     prev.torque_avg, keys, lam, prev.asleep, prev.still, prev.prev_x,
+                     prev.prev_q, prev.prev_v, prev.prev_omega, prev.prev_q_sf,
+                     prev.hist)  # fmt: skip
+
+
+@kernel(error_model="numpy")
+def _state_set_like(out):
+    """A layout.StateSet of fresh arrays shaped as out's."""
+    e, o = np.empty_like, out
+    return StateSet(e(o.x), e(o.q), e(o.v), e(o.omega), e(o.q_sf), e(o.yielded), e(o.anchor),
+                    e(o.torque_avg), e(o.torque), e(o.asleep), e(o.still), e(o.prev_x),
+                    e(o.prev_q), e(o.prev_v), e(o.prev_omega), e(o.prev_q_sf),
+                    e(o.hist))  # fmt: skip
 
 
 @kernel(error_model="numpy", _nrt=False)

@@ -197,8 +197,11 @@ Flags = offsets("Flags", [
 ])  # fmt: skip
 """ivec: the pointer's mode (solver.rows.grip_kernel), gripped body, the loads given."""
 
-ReportInt = offsets("ReportInt", [("rows", 1), ("contacts", 1), ("iterations", 1), ("solver", 1)])
-"""rep_i: a step's rows (on SUBSTEP: the substeps asked for), contacts, iterations, solver."""
+ReportInt = offsets("ReportInt", [
+    ("rows", 1), ("contacts", 1), ("iterations", 1), ("solver", 1), ("substeps", 1),
+])  # fmt: skip
+"""rep_i: a step's rows (on SUBSTEP: the substeps asked for), contacts, iterations, solver,
+and the parts it was taken in (StepReport.substeps)."""
 
 ReportFloat = offsets("ReportFloat", [
     ("residual", 1), ("grip_force", 3), ("grip_torque", 3), ("touch_force", 3),
@@ -245,6 +248,9 @@ Scratch = structure("Scratch", ("scratch",), [
     ("limit", LimitScratch), ("flows", "b"), ("solvers", SolverScratch),
     ("pred", Prediction), ("moving", "f6"),  # the BDF2 stage's
     ("stage_opt", "f"),  # Opt.SIZE: opt with the stage's h and yield filter time
+    ("part_opt", "f"),  # Opt.SIZE: opt with a part's h (kernel.step_parts)
+    ("part_pointer", "f"),  # Pointer.SIZE: the pointer at a part's end
+    ("part_report", "f"),  # ReportFloat.SIZE: the parts' summed report
 ])  # fmt: skip
 """The arrays kernel._step works in: whatever they hold on entry is overwritten first."""
 
@@ -260,6 +266,7 @@ SimArrays = structure("SimArrays", ("sim",), [
     ("packed", Packed),  # first: a Sim's flat buffers are also a flat packed model
     ("set0", StateSet), ("set1", StateSet), ("warm", Warm), ("rep_i", "i"),
     ("rep_f", "f"), ("work", StepWork),
+    ("spare", StateSet), ("spare_keys", "i"), ("spare_lam", "f"),  # a step's parts
 ])  # fmt: skip
 
 # -- ad hoc views of the model that kernels take -----------------------------------------

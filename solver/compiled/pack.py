@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from solver.advance.sleep import body_islands
-from solver.advance.substep import model_levers, sub_model
+from solver.advance.substep import model_levers
 from solver.compiled.clock import STAGES
 from solver.compiled.flat import flatten
 from solver.compiled.layout import (
@@ -77,7 +77,6 @@ class FastModel:
     coupling: tuple = (None, None, None)  # (Coupling packed last, its array, its flags)
     pin_cache: tuple = ((), None)  # (pins packed last, their arrays: fast._pin_arrays)
     pointer: tuple = ()
-    subs: dict = field(default_factory=dict)  # n → the FastModel of the step at h/n
     no_history: tuple = ()  # a StateSet's history arrays of a state without one (zeros)
 
     def __post_init__(self) -> None:
@@ -96,14 +95,6 @@ class FastModel:
     pws = property(lambda self: self.packed.pws)
     opt = property(lambda self: self.packed.opt)
     iopt = property(lambda self: self.packed.iopt)
-
-    def sub(self, n: int) -> FastModel:
-        """The packed model of this model's step at h/n (solver.advance.substep),
-        packed the first time a step needs it and kept with this one."""
-        got = self.subs.get(n)
-        if got is None:
-            got = self.subs[n] = pack(sub_model(self.model, n))
-        return got
 
 
 def _c(x, dtype=float) -> np.ndarray:

@@ -17,9 +17,10 @@ reads what it needs, ``sim.contacts``, ``sim.report``, ``sim.state``.
 On the doll's grip scene at h = 1 ms ``advance`` costs ~6 µs outside the kernel's own
 work (packing the input ~3, unboxing the 15 arrays ~1.6; ``step`` 3–5 µs more for the
 report), against ~35 µs for fast_step (docs/performance.md).  The states are exactly
-fast_step's (the same kernel); a step the kernel hands back (substeps, a box–box
-contact, a monitor failure, an unsupported model) runs through ``fast_step`` on a
-snapshot, so errors and results are the same too.
+fast_step's (the same kernel, which also takes a subdivided step's parts in place:
+kernel.step_parts); a step the kernel hands back (a box–box contact, a monitor failure,
+an unsupported model) runs through ``fast_step`` on a snapshot, so errors and results
+are the same too.
 """
 
 from __future__ import annotations
@@ -83,13 +84,14 @@ class Sim:
                 *(np.zeros_like(_field(rest, f, nb)) for f in STATE_SET_FIELDS),
                 *(np.zeros_like(a) for a in fm.no_history),
             )
-            for _ in range(2)
+            for _ in range(3)  # the two the steps flip between, and a step's parts' spare
         ]
         self._history = bool(fm.iopt[IOpt.bdf2])
         warm = Warm(np.zeros(rows, np.int64), np.zeros(rows), np.zeros(1, np.int64))
         work = StepWork(*step_arrays(nb, len(fm.m.joint_parent), rows, len(fm.tree.parent)))
-        arrays = SimArrays(fm.packed, *sets, warm, np.zeros(ReportInt.SIZE, np.int64),
-                           np.zeros(ReportFloat.SIZE), work)  # fmt: skip
+        arrays = SimArrays(fm.packed, *sets[:2], warm, np.zeros(ReportInt.SIZE, np.int64),
+                           np.zeros(ReportFloat.SIZE), work, sets[2], np.zeros(rows, np.int64),
+                           np.zeros(rows))  # fmt: skip
         self._flat, views = flatten(arrays)
         self._sets, self._warm = (views.set0, views.set1), views.warm
         self._rep_i, self._rep_f = views.rep_i, views.rep_f
@@ -169,7 +171,7 @@ class Sim:
         fm = self._fm
         self._pins = inp.pins
         ins = _input_arrays(fm, inp) if fm.reason is None else None
-        if ins is not None and _KERNEL[0](self._flat, self._phase, ins)[0] == OK:
+        if ins is not None and _KERNEL[0](self._flat, self._phase, ins) == OK:
             self._stepped()
         else:
             self._hand_back(inp)
@@ -193,7 +195,7 @@ class Sim:
         poses = np.concatenate(path, axis=1)  # each row as the kernel's pointer vector
         for k in range(n):
             pvec[:] = poses[k]
-            if kernel(flat, self._phase, ins)[0] == OK:
+            if kernel(flat, self._phase, ins) == OK:
                 self._stepped()
                 wrench[k] = rep[WRENCH]
             else:
@@ -208,8 +210,8 @@ class Sim:
         self._handed_back = None
 
     def _hand_back(self, inp: StepInput) -> None:
-        """A step the kernel did not take in place, taken by fast_step (substeps, a
-        monitor failure: its error), then loaded."""
+        """A step the kernel did not take in place, taken by fast_step (a box–box contact,
+        a monitor failure: its error), then loaded."""
         new, report = fast_step(self._fm, self.state, inp)
         self.load(new)
         self._handed_back = report
@@ -232,7 +234,9 @@ class Sim:
     @property
     def substeps(self) -> int:
         """The last step's substeps (StepReport.substeps: > 1 when it was subdivided)."""
-        return 1 if self._handed_back is None else self._handed_back.substeps
+        if self._handed_back is not None:
+            return self._handed_back.substeps
+        return int(self._rep_i[ReportInt.substeps])
 
 
 def _field(state: State, name: str, nb: int) -> np.ndarray:

@@ -363,6 +363,9 @@ def scratch_view(flat, k):
         prediction_view(flat, k + 35),  # pred
         leaf_f6(flat, k + 41),  # moving
         leaf_f(flat, k + 42),  # stage_opt
+        leaf_f(flat, k + 43),  # part_opt
+        leaf_f(flat, k + 44),  # part_pointer
+        leaf_f(flat, k + 45),  # part_report
     )
 
 
@@ -379,8 +382,8 @@ def warm_view(flat, k):
 def step_work_view(flat, k):
     return StepWork(
         scratch_view(flat, k + 0),  # scratch
-        leaf_i(flat, k + 43),  # keys
-        leaf_f(flat, k + 44),  # lam
+        leaf_i(flat, k + 46),  # keys
+        leaf_f(flat, k + 47),  # lam
     )
 
 
@@ -394,4 +397,7 @@ def sim_arrays_view(flat, k):
         leaf_i(flat, k + 143),  # rep_i
         leaf_f(flat, k + 144),  # rep_f
         step_work_view(flat, k + 145),  # work
+        state_set_view(flat, k + 193),  # spare
+        leaf_i(flat, k + 210),  # spare_keys
+        leaf_f(flat, k + 211),  # spare_lam
     )

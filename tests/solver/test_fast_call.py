@@ -50,9 +50,10 @@ def test_states_and_reports_are_the_constructors():
     prev = dict(zip(HISTORY_FIELDS, _history(), strict=False))
     assert same(got, State(0.5, 3, *arrays, **prev, prev_h=0.005, prev_mark=1.5, prev_load=2.5))
     rep_f, at = np.arange(10.0), ReportFloat
-    got = kernel_report(np.array([108, 2, 15, 1]), rep_f)
+    got = kernel_report(np.array([108, 2, 15, 1, 3]), rep_f)
     force, torque = rep_f[at.grip_force : at.grip_torque], rep_f[at.grip_torque : at.touch_force]
-    want = StepReport(108, 2, 15, 0.0, SOLVER_NAMES[1], force, torque, rep_f[at.touch_force :])
+    want = StepReport(108, 2, 15, 0.0, SOLVER_NAMES[1], force, torque, rep_f[at.touch_force :],
+                      substeps=3)  # fmt: skip
     assert same(got, want)
 
 

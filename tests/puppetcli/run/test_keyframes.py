@@ -99,6 +99,20 @@ def test_bone_pose_copies_and_checks_shapes() -> None:
         BonePose(head=np.zeros(3), rotation=np.zeros(3), local=np.ones(4))
 
 
+def test_a_quaternion_with_negative_w_is_kept_as_the_same_rotation_with_w_positive() -> None:
+    from scipy.spatial.transform import Rotation
+
+    q = np.array([-0.5, 0.5, -0.5, 0.5])  # w < 0
+    pose = BonePose(head=np.zeros(3), rotation=q, local=-q)
+    assert pose.rotation[0] > 0.0 and pose.local[0] > 0.0
+    # scipy's reading of both: the same rotation as q (independent of the sign rule)
+    for kept in (pose.rotation, pose.local):
+        turn = Rotation.from_quat(kept, scalar_first=True).inv() * Rotation.from_quat(
+            q, scalar_first=True
+        )
+        assert turn.magnitude() < 1e-15
+
+
 @pytest.mark.parametrize(
     ("mutate", "match"),
     [
@@ -106,6 +120,9 @@ def test_bone_pose_copies_and_checks_shapes() -> None:
         (lambda k: setattr(k.bones["spine"], "local", np.array([2.0, 0, 0, 0])), "unit"),
         (lambda k: k.extra.update(bones=1), "reserved"),
         (lambda k: setattr(k, "time", float("inf")), "not finite"),
+        # beyond what read_keyframes accepts (BAD_FILES: "magnitude at most 1e+09")
+        (lambda k: setattr(k, "time", 1.5e9), "beyond"),
+        (lambda k: setattr(k.bones["hips"], "head", np.array([0.0, -2e9, 0.0])), "beyond"),
     ],
 )
 def test_write_rejects_bad_values_and_writes_nothing(
@@ -174,6 +191,11 @@ BAD_FILES = [
     (
         broken(lambda d: _pose(d, 1, "l.arm").update(local=[1, 0, "x", 0])),
         ':keys[1].bones["l.arm"].local[2]: expected a finite number, got "x"',
+    ),
+    (
+        broken(lambda d: _pose(d).update(head=[0, -2e9, 0])),
+        ":keys[0].bones.hips.head[1]: expected a number of magnitude at most 1e+09, "
+        "got -2000000000.0",
     ),
     (
         broken(lambda d: _pose(d).update(head=[0, True, 0])),
@@ -254,11 +276,15 @@ def test_written_files_follow_the_shipped_schema(tmp_path: Path) -> None:
         lambda d: d["keys"][0].pop("time"),
         lambda d: d["keys"][0]["bones"]["hips"]["head"].__setitem__(0, "0"),
         lambda d: d.__setitem__("rig", 7),
+        lambda d: d["keys"][0]["bones"]["hips"]["local"].__setitem__(0, -0.5),  # w < 0
+        lambda d: d["keys"][0]["bones"]["hips"]["local"].__setitem__(0, "1"),
     ):
         bad = copy.deepcopy(doc)
         change(bad)
         broken.append(bool(list(validator.iter_errors(bad))))
-    assert broken == [True] * 5
+    assert broken == [True] * 7
+    bones = doc["keys"][0]["bones"].values()
+    assert all(b[f][0] >= 0.0 for b in bones for f in ("rotation", "local"))
 
 
 def test_a_known_rotation_is_written_scalar_first(tmp_path: Path) -> None:
