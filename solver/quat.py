@@ -87,19 +87,30 @@ def normalize(q: np.ndarray) -> np.ndarray:
     return q / np.linalg.norm(q, axis=-1, keepdims=True)
 
 
+OPPOSITE = 1.5e-8
+"""|a + b| (unit a, b) below which ``from_two_vectors`` takes the two as opposite: there
+the shortest arc's axis a × b, of length ~|a + b|, carries a rounding error of
+~1e-16/|a + b| rad, and taking any axis ⟂ a instead errs by at most |a + b|; the two
+are equal near 1.5e-8."""
+
+
 def from_two_vectors(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Shortest-arc unit quaternion rotating direction a onto direction b (both (3,))."""
+    """Shortest-arc unit quaternion rotating direction a onto direction b (both (3,)): b
+    within ~2e-16/|a + b| rad (unit a, b); for opposite directions (|a + b| < OPPOSITE) a
+    half turn about an axis ⟂ a, a × x̂ (or a × ẑ when a is along x)."""
     a = a / np.linalg.norm(a)
     b = b / np.linalg.norm(b)
     c = float(np.dot(a, b))
-    if c < -1.0 + 1e-12:
-        # Opposite: any axis perpendicular to a.
+    half = a + b
+    if np.linalg.norm(half) < OPPOSITE:
         axis = np.cross(a, [1.0, 0.0, 0.0])
         if np.linalg.norm(axis) < 1e-6:
             axis = np.cross(a, [0.0, 0.0, 1.0])
         axis /= np.linalg.norm(axis)
         return np.array([0.0, *axis])
-    q = np.array([1.0 + c, *np.cross(a, b)])
+    # 1 + c = |a + b|²/2, which keeps its digits where a·b is near −1 and 1 + c has none
+    w = 1.0 + c if c > -0.5 else 0.5 * float(np.dot(half, half))
+    q = np.array([w, *np.cross(a, b)])
     return q / np.linalg.norm(q)
 
 
