@@ -89,9 +89,11 @@ class StepReport:
     grip_force (3,) N, grip_torque (3,) N·m: the coupling's wrench on the gripped
     bone (torque about the grip point); touch_force (3,) N: the pointer's contact
     force on the bones in free mode.  The user's hand feels their opposite.
-    substeps: how many equal substeps the step took (solver.advance.substep); with more than
-    one, rows and contacts are the last substep's, iterations their sum, the residual
-    their worst and the wrenches their mean.
+    substeps: how many parts the step was taken in: equal substeps when its joints'
+    tension needs them (solver.advance.substep), three for a bdf2 restart
+    (solver.advance.bdf2_kernel.RESTART); with more than one, rows and contacts are the
+    last part's, iterations their sum, the residual their worst and the wrenches their
+    mean.
     pin_force (npin,3) N, pin_torque (npin,3) N·m: the wrench each of the input's pins put
     on its bone (force at the pinned point; with substeps, the last substep's); pin_slip
     (npin,) bool: a row of the pin reached its limit (solver.rows.pin.retarget).
