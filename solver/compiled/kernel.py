@@ -12,9 +12,11 @@
 Packed arguments (see ``solver.compiled.pack``): m model arrays, g geometry, tree the
 elimination forest, ws/pws workspaces, opt/iopt options, st state arrays, inp input.
 Status FALLBACK hands the step back to the numpy implementation (box–box contact, a
-monitor failure that must raise, a degenerate direct system); SUBSTEP asks for
-rep_i[ReportInt.rows] equal substeps (solver.advance.substep) before anything is computed,
-RESTART for a BDF2 step without history in solver.advance.bdf2.RESTART's parts.
+monitor failure that must raise, a degenerate direct system).  ``_step`` returns SUBSTEP
+(rep_i[ReportInt.rows] equal substeps: solver.advance.substep) or RESTART (a BDF2 step
+without history: solver.advance.bdf2_kernel.RESTART's parts) before anything is computed;
+the entry points then take the step in those parts here (``step_parts``), so neither
+status leaves the kernel.
 
 Under ``integrator: bdf2`` the same pipeline runs as the BDF2 stage (solver.advance.bdf2):
 from the predicted end pose (``_stage``), with opt's h = γ, the rows' velocity shift
