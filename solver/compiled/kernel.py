@@ -323,9 +323,9 @@ def step_parts(flat, st, inp, sets, rep_i, rep_f, scratch, warm, status):
         d = RESTART_PARTS[k] if restart else n
         done += h / d
         part = _part_input(inp, max(h - done, 0.0), scratch.part_pointer)
-        last = (n - 1 - k) % 2 == 0
-        target = out if last else spare
-        wk, wv = (keys, values) if last else (spare_keys, spare_values)
+        into_out = (n - 1 - k) % 2 == 0  # so that the last part writes out
+        target = out if into_out else spare
+        wk, wv = (keys, values) if into_out else (spare_keys, spare_values)
         status, count = _step(flat, here, part, target, rep_i, rep_f, scratch, wk, wv, d)
         if status != OK:
             return status, 0
