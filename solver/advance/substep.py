@@ -26,8 +26,8 @@ from functools import partial
 
 import numpy as np
 
-from solver import quat
 from solver.jit import kernel
+from solver.kin_kernel import qexp, qmul, qnormalize
 from solver.model import Model, kept_with
 from solver.rows.grip import Pointer
 from solver.state import State, StepInput, StepReport
@@ -163,12 +163,24 @@ def sub_model(model: Model, n: int) -> Model:
 
 def pointer_at(ptr: Pointer | None, before_end: float) -> Pointer | None:
     """The step's pointer ``before_end`` seconds before the end of the step: its velocity
-    is the step's mean, so its pose moves back along it."""
+    is the step's mean, so its pose moves back along it (``moved_back``)."""
     if ptr is None or before_end == 0.0:
         return ptr
-    pos = ptr.pos - before_end * ptr.vel
-    q = quat.normalize(quat.mul(quat.exp(-before_end * ptr.omega), ptr.quat))
-    return replace(ptr, pos=pos, quat=q)
+    f = np.float64
+    pos, q = moved_back(np.asarray(ptr.pos, f), np.asarray(ptr.quat, f), np.asarray(ptr.vel, f),
+                        np.asarray(ptr.omega, f), before_end)  # fmt: skip
+    return replace(ptr, pos=np.array(pos), quat=np.array(q))
+
+
+@kernel(error_model="numpy")
+def moved_back(pos, q, vel, omega, before_end):
+    """(position, quaternion) tuples of a pose (pos (3,), q (4,)) moving at (vel, omega)
+    ``before_end`` seconds earlier: pos − t·vel, normalize(exp(−t·ω) ⊗ q).  The numpy
+    step's ``pointer_at`` and the compiled step's parts (kernel.step_parts) both call it."""
+    t = before_end
+    back = (pos[0] - t * vel[0], pos[1] - t * vel[1], pos[2] - t * vel[2])
+    turn = qexp((-t * omega[0], -t * omega[1], -t * omega[2]))
+    return back, qnormalize(qmul(turn, (q[0], q[1], q[2], q[3])))
 
 
 def run_substeps(

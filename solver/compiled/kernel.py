@@ -35,7 +35,7 @@ from solver.advance.rheology_kernel import rheology_update
 from solver.advance.sleep import settle
 from solver.advance.sleep_kernel import flowing_joints, wake
 from solver.advance.stabilize_kernel import needs_projection, project
-from solver.advance.substep import substeps_needed
+from solver.advance.substep import moved_back, substeps_needed
 from solver.collide.scene_kernel import world_shapes
 from solver.compiled.clock import cycles, tick
 from solver.compiled.flat import node_count, row_capacity
@@ -64,7 +64,7 @@ from solver.compiled.layout import (
 )  # fmt: skip
 from solver.compiled.views import packed_view
 from solver.jit import kernel
-from solver.kin_kernel import frames, qexp, qmul, qnormalize
+from solver.kin_kernel import frames
 from solver.rows.build_kernel import build_rows
 from solver.rows.grip_kernel import MODE_NONE, MODE_TOUCH, is_touch_row
 from solver.rows.joints_kernel import limit_arrays
@@ -351,14 +351,13 @@ def _part_input(inp, before_end, pointer):
     p = inp.pointer
     for k in range(len(pointer)):
         pointer[k] = p[k]
+    pos, q = moved_back(p[Pointer.pos : Pointer.quat], p[Pointer.quat : Pointer.vel],
+                        p[Pointer.vel : Pointer.omega], p[Pointer.omega : Pointer.radius],
+                        before_end)  # fmt: skip
     for k in range(3):
-        pointer[Pointer.pos + k] = p[Pointer.pos + k] - before_end * p[Pointer.vel + k]
-    w = (-before_end * p[Pointer.omega], -before_end * p[Pointer.omega + 1],
-         -before_end * p[Pointer.omega + 2])  # fmt: skip
-    q = (p[Pointer.quat], p[Pointer.quat + 1], p[Pointer.quat + 2], p[Pointer.quat + 3])
-    moved = qnormalize(qmul(qexp(w), q))
+        pointer[Pointer.pos + k] = pos[k]
     for k in range(4):
-        pointer[Pointer.quat + k] = moved[k]
+        pointer[Pointer.quat + k] = q[k]
     return Input(inp.force, inp.torque, pointer, inp.coupling, inp.flags, inp.pins, inp.pin_bone)
 
 
