@@ -78,6 +78,7 @@ class FastModel:
     pin_cache: tuple = ((), None)  # (pins packed last, their arrays: fast._pin_arrays)
     pointer: tuple = ()
     no_history: tuple = ()  # a StateSet's history arrays of a state without one (zeros)
+    no_input: tuple | None = None  # the kernel's input of a step without one (fast._input_arrays)
 
     def __post_init__(self) -> None:
         p, at = self.pvec, Pointer

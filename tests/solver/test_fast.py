@@ -226,6 +226,19 @@ def test_doll_with_contacts_push_grip_and_touch_matches(method):
     assert max(np.abs(r.touch_force).max() for r in reports[250:]) > 1.0
 
 
+def test_steps_without_input_between_grips_match():
+    """A step without input reuses one packed input (fast._input_arrays): after a gripped
+    step it must let go (the kernel's flags rewritten), and the grip after it take hold
+    again, as the numpy step does."""
+    model = build_model(load_rig(DOLL)).with_options(h=0.001)
+    state, grips = scene_inputs(model, 60)
+    inputs = [None] * 5 + grips[:20] + [None] * 10 + grips[30:50] + [None] * 10
+    reports = lockstep(model, state, inputs)
+    assert max(np.abs(r.grip_force).max() for r in reports[5:25]) > 1.0
+    assert not any(r.grip_force.any() for r in reports[25:35] + reports[55:])
+    assert all(r.grip_force.any() for r in reports[35:55])
+
+
 def lying_chain(links: int = 30, iterations: int = 100):
     """A free chain of balls lying on the ground: a resting contact each."""
     spec = chain(links, 0.001, root_mode="free", ground=0.98, collide=True, shape="sphere")
