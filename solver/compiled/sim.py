@@ -14,9 +14,9 @@ place (as MuJoCo's mjData), so a step only passes its input in and its report ou
 ``sim.advance(inp)`` is the step without its report (as mj_step on mjData): a loop then
 reads what it needs, ``sim.contacts``, ``sim.report``, ``sim.state``.
 
-On the doll's grip scene at h = 1 ms ``advance`` costs ~6 µs outside the kernel's own
-work (packing the input ~3, unboxing the 15 arrays ~1.6; ``step`` 3–5 µs more for the
-report), against ~35 µs for fast_step (docs/performance.md).  The states are exactly
+On the doll's grip scene at h = 1 ms ``advance`` costs ~1.8 µs outside the kernel's own
+work (packing the grip's input ~1.5; a step without input ~0.1; ``step`` ~2 µs more for
+the report), against ~35 µs for fast_step (docs/performance.md).  The states are exactly
 fast_step's (the same kernel, which also takes a subdivided step's parts in place:
 kernel.step_parts); a step the kernel hands back (a box–box contact, a monitor failure,
 an unsupported model) runs through ``fast_step`` on a snapshot, so errors and results
@@ -165,7 +165,7 @@ class Sim:
         return self.report
 
     def advance(self, inp: StepInput | None = None) -> None:
-        """``step`` without making the report (~3–5 µs of Python), as mj_step: what a loop
+        """``step`` without making the report (~2 µs less Python), as mj_step: what a loop
         needs afterwards it reads (``report``, ``contacts``, ``state``)."""
         inp = inp or _NO_INPUT
         fm = self._fm
