@@ -3,7 +3,8 @@ joint gaps."""
 
 from __future__ import annotations
 
-from solver.advance.stabilize_kernel import PROJECT_TOL, gap2
+from solver.advance.stabilize import projection_tol
+from solver.advance.stabilize_kernel import gap2
 from solver.compiled.layout import Opt
 from solver.jit import kernel
 
@@ -12,9 +13,9 @@ from solver.jit import kernel
 def gaps_within(projected, opt):
     """After integration and ``project``: every anchor gap is known to be within the
     monitor's limit without measuring it, when nothing needed projecting (every awake
-    joint within PROJECT_TOL, and PROJECT_TOL within the limit) — the sleeping joints
-    have not moved since the step's first check (``state_ok`` on its start pose)."""
-    return not projected and opt[Opt.max_joint_gap] >= PROJECT_TOL
+    joint within the step's projection_tol, and that within the limit) — the sleeping
+    joints have not moved since the step's first check (``state_ok`` on its start pose)."""
+    return not projected and opt[Opt.max_joint_gap] >= projection_tol(opt[Opt.h])
 
 
 @kernel(error_model="numpy", _nrt=False)

@@ -8,11 +8,19 @@ the gap C (3 per joint) is removed by the mass-weighted smallest correction:
 
 Δ = (Δx, Δθ) per body, applied as x += Δx, q ← exp(Δθ) ⊗ q.  This changes
 positions only (not velocities), so it adds no energy.  It is skipped when every
-gap is already below ``tol`` (0.1 mm by default) and repeated (Newton-like) while
-it is not.  Moving positions changes the orbital angular momentum Σ x × p, so the
-projection (which also bleeds a little energy, since the gaps it closes always
-open outwards) is a safety net for violent motion at large steps, not part of
-ordinary steps: below ``tol`` the step conserves momentum exactly.
+gap is already below ``tol`` and repeated (Newton-like) while it is not.  Moving
+positions changes the orbital angular momentum Σ x × p, so the projection (which also
+bleeds a little energy, since the gaps it closes always open outwards) is a safety net
+for violent motion, not part of ordinary steps: below ``tol`` the step conserves
+momentum exactly.
+
+The trigger (``projection_tol``) is 0.1 mm up to PROJECT_STEP (5 ms, the rigs' step) and
+grows with h above it (0.4 mm at 20 ms, 1 mm at 50 ms).  The gap a step leaves grows as
+(ωh)²·r, so a fixed 0.1 mm fired on a quarter of the steps of ordinary motion at 10–40 ms
+(the released chains and doll of ``puppetcli bench --accuracy``), moving positions without
+their velocities: against it the scaled trigger takes 7–22 % less time there, with the bent
+chain's error 4.31 → 3.55 mm at 10 ms (docs/integrators.md).  Velocity-level drift
+correction (Options.joint_erp) still pulls every gap back each step.
 """
 
 from __future__ import annotations
@@ -20,6 +28,7 @@ from __future__ import annotations
 import numpy as np
 
 from solver import quat
+from solver.jit import kernel
 from solver.model import Model
 from solver.observe import joint_gaps
 from solver.rows.joints import anchor_rows, joint_frames
@@ -32,17 +41,30 @@ def _subset(rows: Rows, keep: np.ndarray) -> Rows:
     return Rows(**{f: getattr(rows, f)[keep] for f in Rows.__dataclass_fields__})
 
 
+PROJECT_TOL, PROJECT_STEP = 1e-4, 5e-3  # m, s: the trigger, and the step up to which it holds
+
+
+@kernel(error_model="numpy")
+def projection_tol(h):
+    """The anchor gap (m) above which a step of h seconds projects (module docstring):
+    PROJECT_TOL up to PROJECT_STEP, growing in proportion to h above it."""
+    return PROJECT_TOL * max(1.0, h / PROJECT_STEP)
+
+
 def project_joints(
     model: Model,
     pos: np.ndarray,
     q: np.ndarray,
-    tol: float = 1e-4,
+    tol: float | None = None,
     rounds: int = 3,
     asleep: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Positions and orientations with the joint anchors pulled together; the joints of
+    """Positions and orientations with the joint anchors pulled together where some gap
+    exceeds ``tol`` (``projection_tol`` of the model's step when None); the joints of
     sleeping bodies (``asleep`` (nb,) bool: solver.advance.sleep) are left as they are."""
     import scipy.linalg  # on use: the compiled step never needs it, and it costs ~0.3 s to import
+
+    tol = projection_tol(model.options.h) if tol is None else tol
 
     if model.njoint == 0:
         return pos, q

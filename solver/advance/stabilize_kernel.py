@@ -29,21 +29,21 @@ from solver.solve.response_kernel import apply, response
 _PROJECT = inspect.signature(project_joints).parameters
 
 
-PROJECT_TOL, PROJECT_ROUNDS = _PROJECT["tol"].default, _PROJECT["rounds"].default
+PROJECT_ROUNDS = _PROJECT["rounds"].default
 
 
 PROJECT_RIDGE = 1e-14  # solver.advance.stabilize's ridge on J M⁻¹ Jᵀ
 
 
 @kernel(error_model="numpy", inline="always")
-def needs_projection(joints, pos, quat, asleep):
-    """Some awake joint's anchors are more than PROJECT_TOL apart (``project``'s work;
-    most steps: none).  joints as ``gap2``'s."""
-    return awake_gap2(joints, pos, quat, asleep) > PROJECT_TOL * PROJECT_TOL
+def needs_projection(joints, pos, quat, asleep, tol):
+    """Some awake joint's anchors are more than ``tol`` apart (``project``'s work; most
+    steps: none).  joints as ``gap2``'s."""
+    return awake_gap2(joints, pos, quat, asleep) > tol * tol
 
 
 @kernel(error_model="numpy", _nrt=True)
-def project(m, joints, tree, pws, pos, quat, asleep):
+def project(m, joints, tree, pws, pos, quat, asleep, tol):
     """Pull joint anchors together in place (solver.advance.stabilize.project_joints) when
     ``needs_projection`` (the caller asks first); False if the projection system is
     degenerate.  joints as ``gap2``'s; tree = (order, parent, no_rheo, rows, size, tw);
@@ -58,7 +58,7 @@ def project(m, joints, tree, pws, pos, quat, asleep):
         if not (asleep[i] if i < nb else asleep[bone[i - nb]]):
             seq[nseq], nseq = i, nseq + 1
     for k in range(PROJECT_ROUNDS):
-        if k > 0 and not needs_projection(joints, pos, quat, asleep):
+        if k > 0 and not needs_projection(joints, pos, quat, asleep, tol):
             break
         frames(quat, m.body_inertia, m.body_inv_inertia, rot, inertia_w, inv_i)
         n = anchor_rows(joints, pos, rot, pos, 1.0, 1.0, False, asleep, prw, 0)

@@ -6,7 +6,7 @@
               pinned at the bound, released when they stop pushing on it; PGS finishes
               if that does not settle) when every row is two-sided; else PGS
               warm-started with last step's λ by row key
-    v, pose = integrate (momentum form), project joints (only above 0.1 mm)
+    v, pose = integrate (momentum form), project joints (only above stabilize.projection_tol)
     q_sf    = rheology update with the solved velocity; warm keys sorted for the next step
 
 Packed arguments (see ``solver.compiled.pack``): m model arrays, g geometry, tree the
@@ -34,6 +34,7 @@ from solver.advance.monitor_kernel import gaps_within, state_ok
 from solver.advance.rheology_kernel import rheology_update
 from solver.advance.sleep import settle
 from solver.advance.sleep_kernel import flowing_joints, wake
+from solver.advance.stabilize import projection_tol
 from solver.advance.stabilize_kernel import needs_projection, project
 from solver.advance.substep import moved_back, substeps_needed
 from solver.collide.scene_kernel import world_shapes
@@ -269,8 +270,9 @@ def _step(flat, st, inp, out, rep_i, rep_f, scratch, keys, values, d):
     if not bdf:
         integrate(m.body_inertia, m.body_inv_inertia, opt[Opt.h], pos, quat, vel, rot, asleep,
                   out.x, out.q, out.omega, scratch.integrate)  # fmt: skip
-    projected = needs_projection(joints, out.x, out.q, asleep)
-    if projected and not project(m, joints, packed.ptree, packed.pws, out.x, out.q, asleep):
+    tol = projection_tol(opt[Opt.h])
+    projected = needs_projection(joints, out.x, out.q, asleep, tol)
+    if projected and not project(m, joints, packed.ptree, packed.pws, out.x, out.q, asleep, tol):
         return FALLBACK, 0
     gaps_known = gaps_within(projected, opt)
     if not state_ok(joints, opt, out.x, out.q, vel[:, :3], out.omega, gaps_known):
