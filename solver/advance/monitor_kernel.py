@@ -3,19 +3,19 @@ joint gaps."""
 
 from __future__ import annotations
 
-from solver.advance.stabilize import projection_tol
 from solver.advance.stabilize_kernel import gap2
 from solver.compiled.layout import Opt
 from solver.jit import kernel
 
 
 @kernel(error_model="numpy", inline="always")
-def gaps_within(projected, opt):
+def gaps_within(projected, opt, tol):
     """After integration and ``project``: every anchor gap is known to be within the
     monitor's limit without measuring it, when nothing needed projecting (every awake
-    joint within the step's projection_tol, and that within the limit) — the sleeping
-    joints have not moved since the step's first check (``state_ok`` on its start pose)."""
-    return not projected and opt[Opt.max_joint_gap] >= projection_tol(opt[Opt.h])
+    joint within the step's projection trigger ``tol``, and that within the limit) — the
+    sleeping joints have not moved since the step's first check (``state_ok`` on its start
+    pose)."""
+    return not projected and opt[Opt.max_joint_gap] >= tol
 
 
 @kernel(error_model="numpy", _nrt=False)

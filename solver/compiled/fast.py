@@ -37,7 +37,7 @@ from solver.compiled.layout import (
     ReportFloat,
     StateSet,
 )
-from solver.compiled.pack import FastModel
+from solver.compiled.pack import NO_FLAGS, FastModel
 from solver.pipeline import step
 from solver.rows.grip import coupling_vector
 from solver.rows.grip_kernel import MODE_GRIP, MODE_NONE, MODE_TOUCH
@@ -50,7 +50,6 @@ SOLVER_NAMES = ("direct", "pgs", "hybrid")
 _F8, _I8, _B1 = np.dtype(np.float64), np.dtype(np.int64), np.dtype(np.bool_)
 _NO_VEC = np.zeros(Coupling.SIZE)  # the pointer / coupling argument when there is none (never read)
 _NO_INPUT = StepInput()  # frozen: one for every step without input
-_NO_FLAGS = (MODE_NONE, 0, False, False, False)  # layout.Flags of a step without input
 _NO_PINS = (np.zeros((0, PinVec.SIZE)), np.zeros(0, np.int64))  # the pins of a step without
 # The report's and the pointer's offsets as plain ints and slices: an enum member costs an
 # attribute lookup each time it is read, and these are read every step.
@@ -132,7 +131,7 @@ def _input_arrays(fm: FastModel, inp: StepInput) -> tuple | None:
     without input gets one tuple of arrays of its own, made once (~0.5 µs a step)."""
     if inp is _NO_INPUT:
         if fm.no_input is None:
-            flags = np.array(_NO_FLAGS, _I8)  # never rewritten, unlike fm.ivec
+            flags = np.array(NO_FLAGS, _I8)  # never rewritten, unlike fm.ivec
             fm.no_input = _new_tuple(Input, (fm.zeros, fm.zeros, _NO_VEC, _NO_VEC, flags,
                                              *_NO_PINS))  # fmt: skip
         return fm.no_input

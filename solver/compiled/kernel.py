@@ -274,7 +274,7 @@ def _step(flat, st, inp, out, rep_i, rep_f, scratch, keys, values, d):
     projected = needs_projection(joints, out.x, out.q, asleep, tol)
     if projected and not project(m, joints, packed.ptree, packed.pws, out.x, out.q, asleep, tol):
         return FALLBACK, 0
-    gaps_known = gaps_within(projected, opt)
+    gaps_known = gaps_within(projected, opt, tol)
     if not state_ok(joints, opt, out.x, out.q, vel[:, :3], out.omega, gaps_known):
         return FALLBACK, 0
     for b in range(nb):  # (an array assigned to a slice needs reference counting)

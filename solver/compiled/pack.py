@@ -43,6 +43,7 @@ from solver.compiled.layout import (
     Workspace,
 )  # fmt: skip
 from solver.model import Model
+from solver.rows.grip_kernel import MODE_NONE
 from solver.rows.joints_kernel import limit_thresholds
 
 METHODS = {"auto": 0, "pgs": 1, "direct": 2, "hybrid": 3}
@@ -51,6 +52,10 @@ FEATURES = (2, 8, 3, 3, 16)  # most contacts per pair of each group
 BOX_BOX = 4
 _GROUP = {(0, 1): 0, (0, 2): 1, (1, 1): 2, (1, 2): 3, (2, 2): BOX_BOX}
 _CLASS = np.array([0, 1, 1, 2])
+
+
+NO_FLAGS = (MODE_NONE, 0, False, False, False)
+"""layout.Flags of a step without input: no pointer, no gripped body, no loads."""
 
 
 @dataclass
@@ -72,7 +77,7 @@ class FastModel:
     pvec: np.ndarray = field(default_factory=lambda: np.zeros(Pointer.SIZE))
     ivec: np.ndarray = field(default_factory=lambda: np.zeros(Flags.SIZE, np.int64))
     rep_i: np.ndarray = field(default_factory=lambda: np.zeros(ReportInt.SIZE, np.int64))
-    flags: tuple = (0, 0, False, False, False)  # what ivec holds
+    flags: tuple = NO_FLAGS  # what ivec holds
     last: tuple = (None, None)  # (State fast_step returned last, its kernel arrays)
     coupling: tuple = (None, None, None)  # (Coupling packed last, its array, its flags)
     pin_cache: tuple = ((), None)  # (pins packed last, their arrays: fast._pin_arrays)

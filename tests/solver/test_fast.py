@@ -23,7 +23,7 @@ from rigbuild import chain, one_bone, rheology
 from puppetcli.bench.stages import scene_inputs
 from puppetcli.rig.load import load_rig
 from solver import quat
-from solver.advance.stabilize import PROJECT_TOL, project_joints, projection_tol
+from solver.advance.stabilize import project_joints, projection_tol
 from solver.compiled.fast import supports
 from solver.compiled.pack import pack
 from solver.engine import Engine
@@ -215,8 +215,21 @@ def doll_inputs(model, steps: int) -> tuple:
     return state, inputs
 
 
-@pytest.mark.parametrize(("integrator", "h", "spin"), [("euler", 0.01, 3.0), ("bdf2", 0.02, 6.0)])
-def test_gaps_below_a_large_steps_trigger_are_left_to_the_rows(integrator, h, spin):
+# The trigger as documented (stabilize's docstring, docs/integrators.md): 0.1 mm up to 5 ms,
+# 0.1 mm × h/5 ms above: 0.2 mm at 10 ms, 0.4 mm at 20 ms.
+TRIGGERS = {0.001: 1e-4, 0.005: 1e-4, 0.01: 2e-4, 0.02: 4e-4, 0.05: 1e-3, 0.25: 5e-3}
+
+
+def test_the_projection_trigger_is_the_documented_one():
+    for h, trigger in TRIGGERS.items():
+        assert projection_tol(h) == pytest.approx(trigger, rel=1e-12)
+
+
+@pytest.mark.parametrize(
+    ("integrator", "h", "spin", "trigger"),
+    [("euler", 0.01, 3.0, TRIGGERS[0.01]), ("bdf2", 0.02, 6.0, TRIGGERS[0.02])],
+)
+def test_gaps_below_a_large_steps_trigger_are_left_to_the_rows(integrator, h, spin, trigger):
     """Above 5 ms the projection's trigger grows with the step (stabilize.projection_tol):
     a tumbling chain's joints open past the 0.1 mm that holds up to 5 ms and are left to the
     rows' drift correction below the step's trigger, alike in both steps (under bdf2 the
@@ -231,7 +244,7 @@ def test_gaps_below_a_large_steps_trigger_are_left_to_the_rows(integrator, h, sp
         state, _ = engine.step(state)
         worst = max(worst, joint_gaps(model, state.body_pos, state.body_quat).max())
     # measured 1.81e-4 m (euler, 10 ms) and 3.88e-4 m (bdf2, 20 ms)
-    assert PROJECT_TOL < worst <= projection_tol(h)
+    assert 1e-4 < worst <= trigger
 
 
 @pytest.mark.parametrize("method", ["auto", "pgs"])
@@ -247,9 +260,9 @@ def test_doll_with_contacts_push_grip_and_touch_matches(method):
 
 
 def test_steps_without_input_between_grips_match():
-    """A step without input reuses one packed input (fast._input_arrays): after a gripped
-    step it must let go (the kernel's flags rewritten), and the grip after it take hold
-    again, as the numpy step does."""
+    """A step without input reuses one packed input with flags of its own
+    (fast._input_arrays): after a gripped step it must let go, and the grip after it take
+    hold again, as the numpy step does."""
     model = build_model(load_rig(DOLL)).with_options(h=0.001)
     state, grips = scene_inputs(model, 60)
     inputs = [None] * 5 + grips[:20] + [None] * 10 + grips[30:50] + [None] * 10
