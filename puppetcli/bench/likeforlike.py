@@ -3,8 +3,9 @@
 
 Both engines get the same bodies, inertias and ball joints with the same Voigt springs
 (``plastic: false``: K_f and D_f about the rest pose, equal on the three axes, no limits,
-no contacts), so they approximate the same ODE; the truth is that ODE integrated to 1e-12
-by DOP853 in joint coordinates (``puppetcli.bench.truth``), independent of both.  Scenes:
+no contacts but the floor of ``chain-floor``), so they approximate the same ODE; the truth
+is that ODE integrated to 1e-12 by DOP853 in joint coordinates (``puppetcli.bench.truth``),
+independent of both.  Scenes:
 
 - ``chain-bent``: 5 links of rigs/chain.yaml (10 cm, 0.2 kg; K = 0.5 N·m/rad,
   D = 0.005 N·m·s/rad) released from a 3-D bend under gravity;
@@ -14,7 +15,13 @@ by DOP853 in joint coordinates (``puppetcli.bench.truth``), independent of both.
   pose under gravity, no input;
 - ``doll-pull``: the same doll at rest, its left hand (forearm_l's tail) pulled 0.21 m
   over 0.5 s along a minimum-jerk path by a 2,000 N/m, 40 N·s/m spring-damper.  Both
-  engines get the pointer's pose and velocity at the end of each step.
+  engines get the pointer's pose and velocity at the end of each step;
+- ``chain-floor``: the 4 links of ``chain-hanging`` with their last link's capsule
+  (radius 1.5 cm) on a frictionless floor 25 cm below the root, which is above where
+  the chain would hang: its tail end presses on the floor all along (the truth's
+  normal force stays between 0.75 and 3.5 N over 2 s), and, released from a pose swung and
+  twisted out of its plane, slides on it.  Our contact is a hard row with no slop
+  (``contact_slop: 0``); MuJoCo's is its default soft contact, frictionless (condim 1).
 
 The error is the RMS (and the largest) distance of every bone's tail from the truth's at
 t = 0.04, 0.08, … 1 s; the time is the wall time of the stepping loop per simulated
@@ -36,6 +43,7 @@ from functools import cache
 from pathlib import Path
 
 import numpy as np
+import scipy.optimize
 from scipy.spatial.transform import Rotation
 
 from puppetcli.bench import mjcf
@@ -49,10 +57,10 @@ from solver.engine import Engine
 from solver.model import Model, build_model
 from solver.observe import points_on_bones, relative_rotations
 from solver.rows.grip import Coupling, Pointer
-from solver.spec import LimitSpec, RheologySpec
+from solver.spec import GroundSpec, LimitSpec, RheologySpec
 from solver.state import State, StepInput, initial_state
 
-SCENES = ("chain-bent", "chain-hanging", "doll-bent", "doll-pull")
+SCENES = ("chain-bent", "chain-hanging", "doll-bent", "doll-pull", "chain-floor")
 DURATION, SAMPLE = 1.0, 0.04  # s: every step below divides SAMPLE
 STEPS = (0.0005, 0.001, 0.002, 0.004, 0.005, 0.01, 0.02, 0.04)
 LARGE_STEPS = (0.02, 0.04, 0.05, 0.1, 0.2, 0.25)
@@ -62,13 +70,17 @@ PULL = dict(bone="forearm_l", delta=np.array([0.0, 0.15, 0.15]), duration=0.5,
             stiffness=2000.0, damping=40.0)  # fmt: skip
 CHAIN_K, CHAIN_D = 0.5, 0.005
 BEND_SEED = 3
+FLOOR = dict(below_root=0.25, swing=0.3, twist=-0.2)
+"""chain-floor: the floor's top (where the last link's tail stays) below the root's
+tail (m), and the start's turns of the first joint about y and the second's (rad)."""
 
 
 def voigt_model(rig: str, links: int | None = None, k: float | None = None,
-                d: float | None = None) -> Model:  # fmt: skip
+                d: float | None = None, ground: GroundSpec | None = None) -> Model:  # fmt: skip
     """A rig with spring-damper joints only: K_f and D_f (their axes' mean, or k and d)
-    equal on all axes, no series damper, limits, ground, props or collisions; the first
-    ``links`` + 1 bones when given."""
+    equal on all axes, no series damper, limits, props or collisions; the first
+    ``links`` + 1 bones when given.  With ``ground``, that ground, which the last bone
+    touches (its only collision shape), with no contact slop."""
     spec = load_rig(RIGS / rig)
     bones = spec.bones if links is None else spec.bones[: links + 1]
     out = []
@@ -79,8 +91,10 @@ def voigt_model(rig: str, links: int | None = None, k: float | None = None,
         kf = float(np.mean(b.rheology.kf)) if k is None else k
         df = float(np.mean(b.rheology.df)) if d is None else d
         rheology = RheologySpec(np.full(3, kf), np.full(3, df), np.full(3, math.inf))
-        out.append(replace(b, rheology=rheology, limits=LimitSpec(), collide=False))
-    return build_model(replace(spec, bones=tuple(out), ground=None, props=()))
+        last = ground is not None and len(out) == len(bones) - 1
+        out.append(replace(b, rheology=rheology, limits=LimitSpec(), collide=last))
+    model = build_model(replace(spec, bones=tuple(out), ground=ground, props=()))
+    return model if ground is None else model.with_options(contact_slop=0.0)
 
 
 def posed(model: Model, rotvecs: np.ndarray) -> State:
@@ -105,6 +119,7 @@ class Scene:
     model: Model
     start: State
     pull: ode.Pull | None
+    floor: ode.Floor | None = None
 
 
 def _bend(n: int, scale: float) -> np.ndarray:
@@ -114,6 +129,8 @@ def _bend(n: int, scale: float) -> np.ndarray:
 @cache
 def scene(name: str) -> Scene:
     """The scene ``name`` (module docstring)."""
+    if name == "chain-floor":
+        return _floor_scene()
     if name.startswith("chain"):
         links = 5 if name == "chain-bent" else 4
         model = voigt_model("chain.yaml", links, CHAIN_K, CHAIN_D)
@@ -129,6 +146,41 @@ def scene(name: str) -> Scene:
     if name == "doll-pull":
         return Scene(name, model, initial_state(model), _pull(model))
     raise ValueError(f"unknown scene {name!r}")
+
+
+def _floor_scene() -> Scene:
+    """chain-floor (module docstring): the chain turned by ``_floor_turns``, its first
+    joint's downward turn chosen so that the last link's tail is on the floor."""
+    links = 4
+    probe = voigt_model("chain.yaml", links, CHAIN_K, CHAIN_D)
+    last = links
+    point = probe.bone_tail0[last] - probe.body_pos0[last]
+    top = probe.bone_tail0[0][1] - FLOOR["below_root"]
+    radius = load_rig(RIGS / "chain.yaml").bones[last].shape.radius  # its capsule's
+    ground = GroundSpec(height=top - radius, friction=0.0)
+    model = voigt_model("chain.yaml", links, CHAIN_K, CHAIN_D, ground)
+    tree = ode.make_tree(model)
+
+    def tail_height(extra: float) -> float:
+        kin = ode.kinematics(tree, _rotations(_floor_turns(links, extra)), np.zeros((links, 3)))
+        return float((kin.pos[last] + kin.rot[last] @ point)[1]) - top
+
+    extra = scipy.optimize.brentq(tail_height, 0.0, 1.0, xtol=1e-15)
+    start = posed(model, _floor_turns(links, extra))
+    return Scene("chain-floor", model, start, None, ode.Floor(last, point, top))
+
+
+def _floor_turns(links: int, extra: float) -> np.ndarray:
+    """chain-floor's start turns: straight down, the first joint raised by ``extra`` about
+    z, swung about y, the second turned back about y (FLOOR)."""
+    turns = np.zeros((links, 3))
+    turns[0] = (0.0, FLOOR["swing"], -math.pi / 2 + extra)
+    turns[1, 1] = FLOOR["twist"]
+    return turns
+
+
+def _rotations(rotvecs: np.ndarray) -> np.ndarray:
+    return Rotation.from_rotvec(rotvecs).as_quat(scalar_first=True)
 
 
 def _pull(model: Model) -> ode.Pull:
@@ -171,7 +223,7 @@ def true_tails(name: str, samples: Samples = SMALL) -> np.ndarray:
         return np.load(path)
     tree = ode.make_tree(sc.model)
     y0 = ode.joint_state(tree, sc.start.body_quat, sc.start.body_omega)
-    ys = ode.integrate(tree, y0, samples.times(), sc.pull)
+    ys = ode.integrate(tree, y0, samples.times(), sc.pull, sc.floor)
     pos, q = ode.body_poses(tree, ys)
     tails = points_on_bones(sc.model, pos, q, sc.model.bone_tail0)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -198,6 +250,7 @@ def _truth_key(sc: Scene, samples: Samples) -> str:
         digest.update(np.ascontiguousarray(a).tobytes())
     digest.update(Path(ode.__file__).read_bytes())
     digest.update(repr(PULL if sc.pull else None).encode())
+    digest.update(repr(FLOOR if sc.floor else None).encode())
     return digest.hexdigest()[:16]
 
 

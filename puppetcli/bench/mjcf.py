@@ -34,7 +34,8 @@ Contacts
 Every geom has contype = conaffinity = 0, and each of our candidate pairs
 (``Geometry.pair_a/pair_b``: no parent–child pairs, no pairs overlapping at rest,
 static shapes only against bodies) is one explicit ``<pair>``, condim 3, friction
-sqrt(μ_a·μ_b); so MuJoCo tests exactly the pairs we test.  MuJoCo's capsule and plane
+sqrt(μ_a·μ_b) (condim 1 where that is 0: frictionless); so MuJoCo tests exactly the
+pairs we test.  MuJoCo's capsule and plane
 axis is local z, ours local y: their geom orientation is ours ⊗ R_x(−90°).
 Contact solver parameters stay MuJoCo's defaults (soft: solref 0.02 1, solimp
 0.9 0.95 0.001; margin 0, no speculative contacts; pyramidal cone).
@@ -227,7 +228,9 @@ def _notes(model: Model) -> list[str]:
     if model.has_collision:
         notes.append(
             "contacts: MuJoCo soft contacts (default solref/solimp, margin 0, pyramidal);"
-            " ours hard rows, 1 cm speculative margin, 0.5 mm slop, 20 % correction"
+            f" ours hard rows, {model.options.contact_margin * 100:g} cm speculative margin,"
+            f" {model.options.contact_slop * 1000:g} mm slop,"
+            f" {model.options.contact_erp * 100:g} % correction"
         )
     return notes
 
@@ -273,7 +276,7 @@ def mjcf_from_model(
             "pair",
             geom1=f"shape{a}",
             geom2=f"shape{b}",
-            condim="3",
+            condim="3" if mu > 0.0 else "1",  # frictionless: normal force only
             friction=_fmt((mu, mu, 0.005, 0.0001, 0.0001)),
         )
     actuators: tuple[str, ...] = ()

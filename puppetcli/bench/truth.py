@@ -35,6 +35,20 @@ axis; the study uses equal axes, where the spring is conservative with potential
 ½K|log q_j|², and energy is conserved with D = 0: tests/puppetcli/bench/test_truth.py).
 F_b, T_b: a spring-damper pulling a point of one bone towards a moving target (the
 grip scene), F = −K_g (p − P(t)) − D_g (ṗ − U(t)), T = (p − x_b) × F.
+
+A frictionless floor under a point p of one bone (the contact scene): while it presses,
+p stays on the plane y = height, a holonomic constraint g(q) = p_y − height = 0 whose
+force is vertical, N ≥ 0.  With G = ∂ṗ_y/∂u (a row of the point's Jacobian) the
+equations become
+
+    [ M  −Gᵀ ] [u̇]   [      Q + …       ]
+    [ G   0  ] [N ] = [ −(velocity-product part of p̈_y) ],
+
+so p̈_y = 0 exactly: started on the plane at rest, p stays on it to the integration's
+tolerance.  The constraint is bilateral here; ``floor_force`` returns N, which the scene
+checks stays positive (the contact never lets go), so the bilateral and the unilateral
+contact have the same solution.  A frictionless constraint does no work: energy is
+conserved with D = 0 (tests/puppetcli/bench/test_truth.py).
 """
 
 from __future__ import annotations
@@ -65,6 +79,17 @@ class Pull:
     stiffness: float
     damping: float
     target: Callable[[float], tuple[np.ndarray, np.ndarray]]
+
+
+@dataclass(frozen=True)
+class Floor:
+    """A frictionless floor under a point of one bone (module docstring): body index,
+    point (3,) in the body's frame from its centre of mass (m), and the height (m) of
+    the plane y = height the point stays on."""
+
+    body: int
+    point: np.ndarray
+    height: float
 
 
 @dataclass(frozen=True)
@@ -227,12 +252,36 @@ def energy(tree: Tree, y: np.ndarray) -> float:
     return float(kinetic + gravity + spring)
 
 
-def derivative(tree: Tree, t: float, y: np.ndarray, pull: Pull | None = None) -> np.ndarray:
+def derivative(
+    tree: Tree, t: float, y: np.ndarray, pull: Pull | None = None, floor: Floor | None = None
+) -> np.ndarray:
     """dy/dt of the state y = [q (4n), u (3n)] at time t."""
-    m = tree.model
     n = len(tree.joint)
     q, u = y[: 4 * n].reshape(n, 4), y[4 * n :].reshape(n, 3)
     kin = kinematics(tree, q, u)
+    mass_matrix, rhs, jv, jw = _equations(tree, t, q, u, kin, pull)
+    if floor is None:
+        udot = np.linalg.solve(mass_matrix, rhs)
+    else:
+        udot, _ = _on_the_floor(mass_matrix, rhs, jv, jw, kin, floor)
+    qdot = 0.5 * _quat_left(u, q)
+    return np.concatenate((qdot.reshape(-1), udot))
+
+
+def floor_force(tree: Tree, t: float, y: np.ndarray, floor: Floor,
+                pull: Pull | None = None) -> float:  # fmt: skip
+    """N (newtons): the floor's push on the point at state y (negative: it would pull)."""
+    n = len(tree.joint)
+    q, u = y[: 4 * n].reshape(n, 4), y[4 * n :].reshape(n, 3)
+    kin = kinematics(tree, q, u)
+    mass_matrix, rhs, jv, jw = _equations(tree, t, q, u, kin, pull)
+    return _on_the_floor(mass_matrix, rhs, jv, jw, kin, floor)[1]
+
+
+def _equations(tree: Tree, t: float, q: np.ndarray, u: np.ndarray, kin: Kinematics,
+               pull: Pull | None) -> tuple:  # fmt: skip
+    """(M, Q + Σ J_bᵀ(…), ∂v/∂u, ∂ω/∂u): M u̇ = rhs without constraints."""
+    m = tree.model
     jv, jw = _jacobians(tree, kin)
     movable = m.body_inv_mass > 0.0
     mass = np.where(movable, m.body_mass, 0.0)
@@ -256,19 +305,34 @@ def derivative(tree: Tree, t: float, y: np.ndarray, pull: Pull | None = None) ->
     theta = Rotation.from_quat(q, scalar_first=True).as_rotvec()
     gen = -m.joint_kf[tree.joint] * theta - m.joint_df[tree.joint] * u
     rhs = gen.reshape(-1) + np.einsum("bik,bi->k", jv, force) + np.einsum("bik,bi->k", jw, torque)
-    udot = np.linalg.solve(mass_matrix, rhs)
-    qdot = 0.5 * _quat_left(u, q)
-    return np.concatenate((qdot.reshape(-1), udot))
+    return mass_matrix, rhs, jv, jw
+
+
+def _on_the_floor(mass_matrix: np.ndarray, rhs: np.ndarray, jv: np.ndarray, jw: np.ndarray,
+                  kin: Kinematics, floor: Floor) -> tuple[np.ndarray, float]:  # fmt: skip
+    """(u̇, N) with the floor's constraint p̈_y = 0 (module docstring)."""
+    b = floor.body
+    lever = kin.rot[b] @ floor.point
+    up = np.array([0.0, 1.0, 0.0])
+    row = jv[b][1] + _cross(lever, up) @ jw[b]  # ∂ṗ_y/∂u: e_y·(δv + δω × lever)
+    omega = kin.omega[b]
+    acc0 = kin.acc0[b] + _cross(kin.alpha0[b], lever) + _cross(omega, _cross(omega, lever))
+    k = len(rhs)
+    kkt = np.zeros((k + 1, k + 1))
+    kkt[:k, :k], kkt[:k, k], kkt[k, :k] = mass_matrix, -row, row
+    sol = np.linalg.solve(kkt, np.append(rhs, -acc0[1]))
+    return sol[:k], float(sol[k])
 
 
 def integrate(
-    tree: Tree, y0: np.ndarray, times: np.ndarray, pull: Pull | None = None, **tolerances
-) -> np.ndarray:
+    tree: Tree, y0: np.ndarray, times: np.ndarray, pull: Pull | None = None,
+    floor: Floor | None = None, **tolerances,
+) -> np.ndarray:  # fmt: skip
     """States (len(times), 7n) at ``times`` from y0 at t = 0 (DOP853, rtol = atol = 1e-12)."""
     opts = {**TIGHT, **tolerances}
     sol = scipy.integrate.solve_ivp(
-        lambda t, y: derivative(tree, t, y, pull), (0.0, float(times[-1])), y0, t_eval=times,
-        **opts,
+        lambda t, y: derivative(tree, t, y, pull, floor), (0.0, float(times[-1])), y0,
+        t_eval=times, **opts,
     )  # fmt: skip
     if not sol.success:
         raise RuntimeError(f"the reference integration failed: {sol.message}")
