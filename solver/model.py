@@ -24,7 +24,7 @@ import numpy as np
 from solver import quat
 from solver.collide import scene as collide
 from solver.massprops import shape_frame, shape_inertia_local, world_inertia
-from solver.spec import RigSpec, ShapeSpec
+from solver.spec import CONTACT_SLOP, RigSpec, ShapeSpec
 
 T = TypeVar("T")
 
@@ -77,7 +77,7 @@ class Options:
     gravity: np.ndarray = field(default_factory=lambda: np.array([0.0, -9.81, 0.0]))
     joint_erp: float = 0.8
     contact_erp: float = 0.2
-    contact_slop: float = 0.0005
+    contact_slop: float = CONTACT_SLOP
     contact_margin: float = 0.01
     limit_margin: float = 0.05
     regularization: float = 1e-6
@@ -225,6 +225,7 @@ def build_model(spec: RigSpec) -> Model:
         warm_start=s.warm_start,
         warm_start_factor=s.warm_start_factor,
         integrator=s.integrator,
+        contact_slop=s.contact_slop,
         gravity=np.asarray(spec.gravity, dtype=float),
     )
     return Model(

@@ -134,6 +134,11 @@ class GroundSpec:
     friction: float = 0.8
 
 
+CONTACT_SLOP = 0.0005
+"""m: how far a resting contact may sink before its row pushes back (quiet resting
+contacts; an error of its own below a millimetre, so measurements set 0)."""
+
+
 @dataclass(frozen=True)
 class SolverSpec:
     """Solver options as a rig or script states them.
@@ -144,6 +149,7 @@ class SolverSpec:
     warm_start_factor: scale on the reused impulses (1.0 = all of it; the
         reference implementation used 0.7).
     integrator: "euler" (the paper's step) or "bdf2" (second order: solver.advance.bdf2).
+    contact_slop: m a contact may sink before it pushes back (CONTACT_SLOP).
     """
 
     h: float = 0.005
@@ -152,6 +158,7 @@ class SolverSpec:
     warm_start: bool = True
     warm_start_factor: float = 1.0
     integrator: str = "euler"
+    contact_slop: float = CONTACT_SLOP
 
 
 @dataclass(frozen=True)

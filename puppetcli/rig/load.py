@@ -85,6 +85,7 @@ def rig_from_text(text: str, source: str) -> RigSpec:
 
 MAX_BONES = 512  # a full-body skeleton with fingers and face has a few hundred at most
 STEP_RANGE = (1e-5, 0.1)  # s: a physics step outside this is a mistake (rig, script, --h)
+SLOP_RANGE = (0.0, 0.01)  # m: a contact sinking more than a centimetre is not resting
 
 
 def read_step(node: Node) -> float:
@@ -99,6 +100,7 @@ _SOLVER_READERS: dict[str, Callable[[Node], Any]] = {
     "warm_start": Node.boolean,
     "warm_start_factor": lambda node: node.number(0.0, 1.0),
     "integrator": lambda node: node.choice(INTEGRATORS),
+    "contact_slop": lambda node: node.number(*SLOP_RANGE),
 }
 
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -67,6 +69,23 @@ def test_capsule_resting_on_the_ground_sinks_less_than_tolerance(h, engine):
     assert -bottom.min() < SINK_TOLERANCE
     # At rest, not bouncing: measured exactly still (asleep) at every h, on both engines.
     assert not state.body_vel.any() and not state.body_omega.any()
+
+
+@pytest.mark.parametrize("engine", ["numpy", "compiled"])
+@pytest.mark.parametrize("slop", [0.0, 0.0005, 0.001])
+def test_a_capsule_started_in_the_ground_is_pushed_out_to_the_slop(slop, engine):
+    # Started d0 = 2 mm deep, the contact row removes contact_erp = 20 % of the depth beyond
+    # the slop each step (its bias), whatever gravity does: after one step
+    # s + 0.8 (d0 − s), and at rest exactly the slop (solver: contact_slop).
+    r, d0 = 0.05, 0.002
+    spec = free_body(ShapeSpec("capsule", radius=r), [0.0, r - d0, 0.0], [0.4, r - d0, 0.0],
+                     [0.0, -G, 0.0], 0.8, 0.005)  # fmt: skip
+    spec = replace(spec, solver=SolverSpec(h=0.005, contact_slop=slop))
+    _, trail = run(spec, 1.0, engine)
+    depth = r - trail[:, 1]
+    # measured: 1.0e-9 m off after the first step, 3.5e-9 m at rest (the regularisation)
+    assert abs(depth[0] - (slop + 0.8 * (d0 - slop))) < 5e-9
+    assert abs(depth[-1] - slop) < 1e-8
 
 
 SLOPE_H = 0.002

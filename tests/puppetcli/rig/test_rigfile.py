@@ -11,6 +11,7 @@ import pytest
 
 from puppetcli.errors import RigError
 from puppetcli.rig.load import load_rig, rig_from_text
+from solver.model import build_model
 
 DOCS = Path(__file__).resolve().parents[3] / "docs"
 
@@ -368,6 +369,15 @@ def test_bad_solver_numbers(tmp_path: Path) -> None:
     expect(message, tmp_path, 3, "solver.iterations", "a positive integer, got 0")
     message, _ = bad(tmp_path, "warm_start_factor: 0.7", "warm_start_factor: 1.5")
     expect(message, tmp_path, 3, "solver.warm_start_factor", "in [0, 1], got 1.5")
+    message, _ = bad(tmp_path, "warm_start_factor: 0.7", "contact_slop: 0.05")
+    expect(message, tmp_path, 3, "solver.contact_slop", "in [0, 0.01], got 0.05")
+
+
+def test_the_contact_slop_reaches_the_model(tmp_path: Path) -> None:
+    default = load_rig(write(tmp_path, VALID))
+    assert default.solver.contact_slop == build_model(default).options.contact_slop == 0.0005
+    given = load_rig(write(tmp_path, VALID.replace("warm_start_factor: 0.7", "contact_slop: 0")))
+    assert given.solver.contact_slop == build_model(given).options.contact_slop == 0.0
 
 
 def test_zero_quaternion(tmp_path: Path) -> None:
