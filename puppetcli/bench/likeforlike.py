@@ -151,14 +151,12 @@ def scene(name: str) -> Scene:
 def _floor_scene() -> Scene:
     """chain-floor (module docstring): the chain turned by ``_floor_turns``, its first
     joint's downward turn chosen so that the last link's tail is on the floor."""
-    links = 4
-    probe = voigt_model("chain.yaml", links, CHAIN_K, CHAIN_D)
-    last = links
-    point = probe.bone_tail0[last] - probe.body_pos0[last]
-    top = probe.bone_tail0[0][1] - FLOOR["below_root"]
-    radius = load_rig(RIGS / "chain.yaml").bones[last].shape.radius  # its capsule's
-    ground = GroundSpec(height=top - radius, friction=0.0)
+    links = last = 4
+    bones = load_rig(RIGS / "chain.yaml").bones
+    top = float(bones[0].tail[1]) - FLOOR["below_root"]
+    ground = GroundSpec(height=top - bones[last].shape.radius, friction=0.0)  # its capsule's
     model = voigt_model("chain.yaml", links, CHAIN_K, CHAIN_D, ground)
+    point = model.bone_tail0[last] - model.body_pos0[last]
     tree = ode.make_tree(model)
 
     def tail_height(extra: float) -> float:

@@ -40,6 +40,7 @@ def facts(model: Model) -> dict[str, Any]:
         "h": opt.h,
         "method": opt.method,
         "integrator": opt.integrator,
+        "contact_slop": opt.contact_slop,
         "iterations": opt.iterations,
         "warm_start": opt.warm_start,
         "solver": solver_words(opt, two_sided_only=not (model.has_collision or model.has_limits)),
@@ -69,7 +70,11 @@ def solver_words(opt: Options, two_sided_only: bool) -> str:
 def summary(f: dict[str, Any]) -> list[str]:
     """The human lines of :func:`facts`."""
     rows, stages = f["rows"], f["stages"]
-    collision = "on" if stages["collision"] else "skipped (no pair can touch)"
+    collision = (
+        f"on (a contact sinks up to {f['contact_slop'] * 1000:g} mm before it pushes back)"
+        if stages["collision"]
+        else "skipped (no pair can touch)"
+    )
     rheo = stages["rheology_joints"]
     limited = rows["limit_at_most"] // 3
     return [
@@ -79,7 +84,7 @@ def summary(f: dict[str, Any]) -> list[str]:
         f"up to {rows['limit_at_most']} limit; {f['collision_pairs']} shape pairs can collide",
         f"stages: collision {collision}, rheology {'on' if rheo else 'skipped'} ({rheo} joints), "
         f"limits {'on' if stages['limits'] else 'skipped'} ({limited} joints)",
-        f"step h = {f['h']:g} s; solver {f['solver']}",
+        f"step h = {f['h']:g} s, integrator {f['integrator']}; solver {f['solver']}",
     ]
 
 

@@ -419,6 +419,17 @@ def test_validate_small_rig_mass_from_density(tmp_path):
     assert summary_numbers(result.stdout) == (3, 2, pytest.approx(2.0 + 1.5 + neck, abs=5e-4))
 
 
+def test_validate_states_the_step_and_the_contacts_slop(tmp_path):
+    result = invoke("validate", write(tmp_path, "rig.yaml", RIG))
+    assert "step h = 0.005 s, integrator euler;" in result.stdout
+    assert "collision on (a contact sinks up to 0.5 mm" in result.stdout
+    given = RIG + "solver: {h: 0.002, integrator: bdf2, contact_slop: 0}\n"
+    result = invoke("validate", write(tmp_path, "rig.yaml", given))
+    assert result.exit_code == 0, result.output
+    assert "step h = 0.002 s, integrator bdf2;" in result.stdout
+    assert "collision on (a contact sinks up to 0 mm" in result.stdout
+
+
 def test_validate_one_bone_skips_collision():
     result = invoke("validate", ONE_BONE)
     assert result.exit_code == 0, result.output
