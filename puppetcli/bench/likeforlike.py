@@ -486,8 +486,18 @@ def format_equal_time(table: list[EqualTime]) -> str:
     for r in table:
         cells = "".join(f"{c * 1e3:>20.3g}" if math.isfinite(c) else f"{'-':>20}"
                         for c in r.costs.values())  # fmt: skip
-        lines.append(f"{r.scene:<15}{r.level * 1e3:<9g}{cells}   {r.ratio:.2f}")
+        lines.append(f"{r.scene:<15}{r.level * 1e3:<9g}{cells}   {_ratio_cell(r)}")
     return "\n".join(lines)
+
+
+def _ratio_cell(row: EqualTime) -> str:
+    """ours ÷ MuJoCo's best, or which side reaches the level alone ("-": neither)."""
+    if math.isfinite(row.ratio):
+        return f"{row.ratio:.2f}"
+    ours = math.isfinite(row.costs.get("bdf2", math.inf))
+    if row.ratio == math.inf:
+        return "only MuJoCo reaches it"
+    return "only bdf2 reaches it" if ours else "-"
 
 
 def csv_text(runs: list[Run]) -> str:

@@ -155,3 +155,18 @@ def test_the_floor_scene_presses_on_its_floor_all_along():
     # measured: 0.76 to 3.47 N (the chain's weight is 7.8 N)
     assert min(pushes) > 0.5
     assert _tail(tree, y0, sc.floor)[0][1] == pytest.approx(sc.floor.height, abs=1e-15)
+
+
+def test_the_equal_time_table_says_who_alone_reaches_a_level():
+    ours, peer = _runs(2.0, 1e-6, "bdf2"), _runs(0.5, 4e-6, "MuJoCo RK4")
+    rows = likeforlike.equal_time(ours + peer, levels=(1e-6, 1.3e-5, 1e-9))
+    # 1e-6 m: only the peer's errors (down to 3.2e-7) reach it; 1e-9: nobody's
+    assert rows[0].ratio == math.inf and math.isnan(rows[2].ratio)
+    mujoco_only = likeforlike.equal_time(peer + [replace(r, rms=math.inf) for r in ours],
+                                         levels=(1.3e-5,))  # fmt: skip
+    bdf2_only = likeforlike.equal_time(ours + [replace(r, rms=math.inf) for r in peer],
+                                       levels=(1.3e-5,))  # fmt: skip
+    text = likeforlike.format_equal_time(rows + mujoco_only + bdf2_only).splitlines()
+    assert text[2].endswith("only MuJoCo reaches it") and text[4].endswith("   -")
+    assert text[3].endswith(f"{rows[1].ratio:.2f}")
+    assert text[5].endswith("only MuJoCo reaches it") and text[6].endswith("only bdf2 reaches it")
