@@ -256,10 +256,7 @@ def derivative(
     tree: Tree, t: float, y: np.ndarray, pull: Pull | None = None, floor: Floor | None = None
 ) -> np.ndarray:
     """dy/dt of the state y = [q (4n), u (3n)] at time t."""
-    n = len(tree.joint)
-    q, u = y[: 4 * n].reshape(n, 4), y[4 * n :].reshape(n, 3)
-    kin = kinematics(tree, q, u)
-    mass_matrix, rhs, jv, jw = _equations(tree, t, q, u, kin, pull)
+    q, u, kin, (mass_matrix, rhs, jv, jw) = _equations(tree, t, y, pull)
     if floor is None:
         udot = np.linalg.solve(mass_matrix, rhs)
     else:
@@ -271,17 +268,17 @@ def derivative(
 def floor_force(tree: Tree, t: float, y: np.ndarray, floor: Floor,
                 pull: Pull | None = None) -> float:  # fmt: skip
     """N (newtons): the floor's push on the point at state y (negative: it would pull)."""
-    n = len(tree.joint)
-    q, u = y[: 4 * n].reshape(n, 4), y[4 * n :].reshape(n, 3)
-    kin = kinematics(tree, q, u)
-    mass_matrix, rhs, jv, jw = _equations(tree, t, q, u, kin, pull)
+    _, _, kin, (mass_matrix, rhs, jv, jw) = _equations(tree, t, y, pull)
     return _on_the_floor(mass_matrix, rhs, jv, jw, kin, floor)[1]
 
 
-def _equations(tree: Tree, t: float, q: np.ndarray, u: np.ndarray, kin: Kinematics,
-               pull: Pull | None) -> tuple:  # fmt: skip
-    """(M, Q + Σ J_bᵀ(…), ∂v/∂u, ∂ω/∂u): M u̇ = rhs without constraints."""
+def _equations(tree: Tree, t: float, y: np.ndarray, pull: Pull | None) -> tuple:
+    """(q, u, kinematics, (M, Q + Σ J_bᵀ(…), ∂v/∂u, ∂ω/∂u)) at state y: M u̇ = rhs
+    without constraints."""
     m = tree.model
+    n = len(tree.joint)
+    q, u = y[: 4 * n].reshape(n, 4), y[4 * n :].reshape(n, 3)
+    kin = kinematics(tree, q, u)
     jv, jw = _jacobians(tree, kin)
     movable = m.body_inv_mass > 0.0
     mass = np.where(movable, m.body_mass, 0.0)
@@ -305,7 +302,7 @@ def _equations(tree: Tree, t: float, q: np.ndarray, u: np.ndarray, kin: Kinemati
     theta = Rotation.from_quat(q, scalar_first=True).as_rotvec()
     gen = -m.joint_kf[tree.joint] * theta - m.joint_df[tree.joint] * u
     rhs = gen.reshape(-1) + np.einsum("bik,bi->k", jv, force) + np.einsum("bik,bi->k", jw, torque)
-    return mass_matrix, rhs, jv, jw
+    return q, u, kin, (mass_matrix, rhs, jv, jw)
 
 
 def _on_the_floor(mass_matrix: np.ndarray, rhs: np.ndarray, jv: np.ndarray, jw: np.ndarray,
