@@ -135,8 +135,8 @@ class GroundSpec:
 
 
 CONTACT_SLOP = 0.0005
-"""m: how far a resting contact may sink before its row pushes back (quiet resting
-contacts; an error of its own below a millimetre, so measurements set 0)."""
+"""m: how far a contact may sink before its row pushes back (quiet resting contacts; a
+little error of its own where contacts drift: measurements set 0, docs/integrators.md)."""
 
 
 @dataclass(frozen=True)

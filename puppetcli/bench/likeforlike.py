@@ -93,8 +93,8 @@ def voigt_model(rig: str, links: int | None = None, k: float | None = None,
         rheology = RheologySpec(np.full(3, kf), np.full(3, df), np.full(3, math.inf))
         last = ground is not None and len(out) == len(bones) - 1
         out.append(replace(b, rheology=rheology, limits=LimitSpec(), collide=last))
-    model = build_model(replace(spec, bones=tuple(out), ground=ground, props=()))
-    return model if ground is None else model.with_options(contact_slop=0.0)
+    solver = spec.solver if ground is None else replace(spec.solver, contact_slop=0.0)
+    return build_model(replace(spec, bones=tuple(out), ground=ground, props=(), solver=solver))
 
 
 def posed(model: Model, rotvecs: np.ndarray) -> State:
@@ -156,15 +156,15 @@ def _floor_scene() -> Scene:
     top = float(bones[0].tail[1]) - FLOOR["below_root"]
     ground = GroundSpec(height=top - bones[last].shape.radius, friction=0.0)  # its capsule's
     model = voigt_model("chain.yaml", links, CHAIN_K, CHAIN_D, ground)
-    point = model.bone_tail0[last] - model.body_pos0[last]
-    tree = ode.make_tree(model)
 
     def tail_height(extra: float) -> float:
-        kin = ode.kinematics(tree, _rotations(_floor_turns(links, extra)), np.zeros((links, 3)))
-        return float((kin.pos[last] + kin.rot[last] @ point)[1]) - top
+        s = posed(model, _floor_turns(links, extra))
+        tails = points_on_bones(model, s.body_pos, s.body_quat, model.bone_tail0)
+        return float(tails[last, 1]) - top
 
     extra = scipy.optimize.brentq(tail_height, 0.0, 1.0, xtol=1e-15)
     start = posed(model, _floor_turns(links, extra))
+    point = model.bone_tail0[last] - model.body_pos0[last]
     return Scene("chain-floor", model, start, None, ode.Floor(last, point, top))
 
 
@@ -175,10 +175,6 @@ def _floor_turns(links: int, extra: float) -> np.ndarray:
     turns[0] = (0.0, FLOOR["swing"], -math.pi / 2 + extra)
     turns[1, 1] = FLOOR["twist"]
     return turns
-
-
-def _rotations(rotvecs: np.ndarray) -> np.ndarray:
-    return Rotation.from_rotvec(rotvecs).as_quat(scalar_first=True)
 
 
 def _pull(model: Model) -> ode.Pull:
@@ -494,10 +490,9 @@ def _ratio_cell(row: EqualTime) -> str:
     """ours ÷ MuJoCo's best, or which side reaches the level alone ("-": neither)."""
     if math.isfinite(row.ratio):
         return f"{row.ratio:.2f}"
-    ours = math.isfinite(row.costs.get("bdf2", math.inf))
     if row.ratio == math.inf:
         return "only MuJoCo reaches it"
-    return "only bdf2 reaches it" if ours else "-"
+    return "only bdf2 reaches it" if math.isfinite(row.costs["bdf2"]) else "-"
 
 
 def csv_text(runs: list[Run]) -> str:
