@@ -1,14 +1,15 @@
-"""Contact rows: one normal row and two friction rows per contact point.
+"""Contact rows: one normal row per contact point, and two friction rows when it has friction.
 
 Normal row: w = n·(v_b + ω_b × r_b − v_a − ω_a × r_a) (separating > 0), λ ≥ 0.
 With depth d (> 0 penetrating, < 0 a gap of −d):
     bias = −d/h                         for a gap (speculative: may close, not cross),
     bias = −erp·max(d − slop, 0)/h      when penetrating (push out beyond the slop).
 Friction rows along t1, t2 ⊥ n, bounds ±μ·λ_n per row (Coulomb friction as a box,
-as in the reference implementation).  t1 follows the tangential relative
-velocity the step would produce without constraints (so a block on a slope has
-one friction row along the slope and the box bound is the exact Coulomb bound);
-at rest a fixed basis is used.
+as in the reference implementation); a frictionless contact (μ = 0) has none, since
+rows held at ±0 would only cost the solver (its λ is exactly zero either way).  t1
+follows the tangential relative velocity the step would produce without constraints
+(so a block on a slope has one friction row along the slope and the box bound is the
+exact Coulomb bound); at rest a fixed basis is used.
 """
 
 from __future__ import annotations
@@ -47,7 +48,8 @@ def contact_rows(
     vel_free: np.ndarray,
     velocity_a: np.ndarray | None = None,
 ) -> Rows:
-    """Rows of all contacts: normals first (in contact order), then their friction pairs.
+    """Rows of all contacts: normals first (in contact order), then the friction pairs of
+    those with friction (μ > 0).
 
     velocity_a (3,): velocity of a moving static side (the pointer); None = at rest.
     """
@@ -65,21 +67,22 @@ def contact_rows(
     normal = make_rows(
         KIND_CONTACT, con.key, con.body_a, con.body_b, jac_a, jac_b, lo=0.0, bias=bias
     )
+    f = np.flatnonzero(con.friction > 0.0)  # the contacts with friction rows
     slip = _point_velocity(vel_free, con.body_b, r_b) - _point_velocity(vel_free, con.body_a, r_a)
-    slip = slip - u
-    t1, t2 = tangent_basis(con.normal, slip)
+    slip = slip[f] - u
+    t1, t2 = tangent_basis(con.normal[f], slip)
     axes = np.stack((t1, t2), axis=1).reshape(-1, 3)
-    fa, fb = point_jacobians(axes, np.repeat(r_a, 2, axis=0), np.repeat(r_b, 2, axis=0))
+    fa, fb = point_jacobians(axes, np.repeat(r_a[f], 2, axis=0), np.repeat(r_b[f], 2, axis=0))
     friction = make_rows(
         KIND_FRICTION,
-        2 * np.repeat(con.key, 2) + np.tile([0, 1], nc),
-        np.repeat(con.body_a, 2),
-        np.repeat(con.body_b, 2),
+        2 * np.repeat(con.key[f], 2) + np.tile([0, 1], len(f)),
+        np.repeat(con.body_a[f], 2),
+        np.repeat(con.body_b[f], 2),
         fa,
         fb,
-        mu=np.repeat(con.friction, 2),
+        mu=np.repeat(con.friction[f], 2),
         bias=-(axes @ u),
     )
     rows = concat([normal, friction])
-    fric_of = np.concatenate((np.full(nc, -1), np.repeat(np.arange(nc), 2)))
+    fric_of = np.concatenate((np.full(nc, -1), np.repeat(f, 2)))
     return replace(rows, fric_of=fric_of.astype(np.int64))

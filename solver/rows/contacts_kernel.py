@@ -1,5 +1,5 @@
-"""Compiled contact rows (solver.rows.contacts's twin): one normal row and two friction
-rows per contact point.
+"""Compiled contact rows (solver.rows.contacts's twin): one normal row per contact point,
+and two friction rows when it has friction.
 """
 
 from __future__ import annotations
@@ -43,7 +43,8 @@ def tangent_basis(normal, slip):
 
 @kernel(error_model="numpy")
 def contact_rows(cb, c0, c1, pos, vel_free, u, h, erp, slop, rw, n):
-    """Normal rows of contacts c0..c1−1, then their friction pairs; u: static side's velocity."""
+    """Normal rows of contacts c0..c1−1, then the friction pairs of those with friction
+    (μ > 0); u: static side's velocity."""
     first = n
     for i in range(c0, c1):
         a, b = cb.body_a[i], cb.body_b[i]
@@ -70,6 +71,8 @@ def contact_rows(cb, c0, c1, pos, vel_free, u, h, erp, slop, rw, n):
         )
         n += 1
     for i in range(c0, c1):
+        if not cb.friction[i] > 0.0:
+            continue
         a, b = cb.body_a[i], cb.body_b[i]
         point, normal = vec(cb.point, i), vec(cb.normal, i)
         r_a = sub(point, vec(pos, a)) if a >= 0 else point

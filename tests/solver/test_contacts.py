@@ -91,7 +91,7 @@ def test_a_capsule_started_in_the_ground_is_pushed_out_to_the_slop(slop, engine)
 SLOPE_H = 0.002
 
 
-def slope_run(tan_slope: float, mu: float, seconds: float):
+def slope_run(tan_slope: float, mu: float, seconds: float, engine: str = "numpy"):
     """The slide along the slope (m) after every step, from the first step's position."""
     theta = np.arctan(tan_slope)
     gravity = [G * np.sin(theta), -G * np.cos(theta), 0.0]  # a slope rising towards -x
@@ -99,7 +99,7 @@ def slope_run(tan_slope: float, mu: float, seconds: float):
         ShapeSpec("box", half_extents=(0.1, 0.05, 0.1)), [0, 0, 0], [0, 0.1, 0], gravity, mu,
         SLOPE_H,
     )  # fmt: skip
-    _, trail = run(spec, seconds)
+    _, trail = run(spec, seconds, engine)
     return theta, trail[:, 0] - trail[0, 0]
 
 
@@ -119,3 +119,21 @@ def test_box_on_a_slope_slides_above_the_friction_angle_at_the_coulomb_rate():
     k = np.arange(1, len(slide) + 1)
     expected = a * SLOPE_H**2 * (k * (k + 1) / 2 - 1)
     assert np.abs(slide - expected).max() < 6e-8  # m, of 0.42 m: measured 1.2e-8
+
+
+@pytest.mark.parametrize("engine", ["numpy", "compiled"])
+def test_a_frictionless_contact_has_one_row_and_lets_the_box_slide_freely(engine):
+    # μ = 0: the box slides at a = g sin θ, the same recursion as above with μ = 0, and
+    # each contact point makes its normal row only (no friction rows held at ±0).
+    theta, slide = slope_run(0.3, 0.0, 0.5, engine)
+    a = G * np.sin(theta)
+    k = np.arange(1, len(slide) + 1)
+    assert np.abs(slide - a * SLOPE_H**2 * (k * (k + 1) / 2 - 1)).max() < 3e-15  # m: 6.7e-16
+    spec = free_body(ShapeSpec("box", half_extents=(0.1, 0.05, 0.1)), [0, 0, 0], [0, 0.1, 0],
+                     [0.0, -G, 0.0], 0.0, SLOPE_H)  # fmt: skip
+    model = build_model(spec).with_options(engine=engine)
+    stepper = Engine(model).stepper(initial_state(model))
+    for _ in range(50):
+        report = stepper.step()
+    assert report.contacts == 4  # the box's bottom corners
+    assert report.rows == report.contacts
