@@ -68,16 +68,16 @@ def contact_rows(
         KIND_CONTACT, con.key, con.body_a, con.body_b, jac_a, jac_b, lo=0.0, bias=bias
     )
     f = np.flatnonzero(con.friction > 0.0)  # the contacts with friction rows
-    slip = _point_velocity(vel_free, con.body_b, r_b) - _point_velocity(vel_free, con.body_a, r_a)
-    slip = slip[f] - u
+    body_a, body_b, r_a, r_b = con.body_a[f], con.body_b[f], r_a[f], r_b[f]
+    slip = _point_velocity(vel_free, body_b, r_b) - _point_velocity(vel_free, body_a, r_a) - u
     t1, t2 = tangent_basis(con.normal[f], slip)
     axes = np.stack((t1, t2), axis=1).reshape(-1, 3)
-    fa, fb = point_jacobians(axes, np.repeat(r_a[f], 2, axis=0), np.repeat(r_b[f], 2, axis=0))
+    fa, fb = point_jacobians(axes, np.repeat(r_a, 2, axis=0), np.repeat(r_b, 2, axis=0))
     friction = make_rows(
         KIND_FRICTION,
         2 * np.repeat(con.key[f], 2) + np.tile([0, 1], len(f)),
-        np.repeat(con.body_a[f], 2),
-        np.repeat(con.body_b[f], 2),
+        np.repeat(body_a, 2),
+        np.repeat(body_b, 2),
         fa,
         fb,
         mu=np.repeat(con.friction[f], 2),

@@ -36,14 +36,14 @@ def free_body(shape: ShapeSpec, head, tail, gravity, friction: float, h: float) 
 
 
 def run(spec: RigSpec, seconds: float, engine: str = "numpy"):
+    """(the stepper after ``seconds``, the body's position after every step)."""
     model = build_model(spec).with_options(engine=engine)
     stepper = Engine(model).stepper(initial_state(model))
     trail = []
     for _ in range(round(seconds / model.options.h)):
         stepper.advance()
         trail.append(stepper.view().body_pos[0].copy())
-    state = stepper.state
-    return state, np.array(trail)
+    return stepper, np.array(trail)
 
 
 # A capsule resting on the ground sinks 3.3e-9, 1.6e-8 and 7.3e-8 m at h = 1, 5, 20 ms
@@ -64,7 +64,8 @@ def test_capsule_resting_on_the_ground_sinks_less_than_tolerance(h, engine):
         0.8,
         h,
     )
-    state, trail = run(spec, 2.0, engine)
+    stepper, trail = run(spec, 2.0, engine)
+    state = stepper.state
     bottom = trail[len(trail) // 2 :, 1] - r
     assert -bottom.min() < SINK_TOLERANCE
     # At rest, not bouncing: measured exactly still (asleep) at every h, on both engines.
@@ -92,48 +93,46 @@ SLOPE_H = 0.002
 
 
 def slope_run(tan_slope: float, mu: float, seconds: float, engine: str = "numpy"):
-    """The slide along the slope (m) after every step, from the first step's position."""
+    """(slope angle, the slide along the slope (m) after every step from the first step's
+    position, the last step's report)."""
     theta = np.arctan(tan_slope)
     gravity = [G * np.sin(theta), -G * np.cos(theta), 0.0]  # a slope rising towards -x
     spec = free_body(
         ShapeSpec("box", half_extents=(0.1, 0.05, 0.1)), [0, 0, 0], [0, 0.1, 0], gravity, mu,
         SLOPE_H,
     )  # fmt: skip
-    _, trail = run(spec, seconds, engine)
-    return theta, trail[:, 0] - trail[0, 0]
+    stepper, trail = run(spec, seconds, engine)
+    return theta, trail[:, 0] - trail[0, 0], stepper.report
+
+
+def sliding(a: float, steps: int) -> np.ndarray:
+    """The slide after steps 1 … ``steps`` of a body accelerating at a from rest under
+    semi-implicit Euler at SLOPE_H: a·h²·k(k+1)/2 after k steps, counted from the first
+    step's position, a·h²·(k(k+1)/2 − 1)."""
+    k = np.arange(1, steps + 1)
+    return a * SLOPE_H**2 * (k * (k + 1) / 2 - 1)
 
 
 def test_box_on_a_slope_sticks_below_the_friction_angle():
-    _, slide = slope_run(0.4, 0.5, 1.0)
+    _, slide, _ = slope_run(0.4, 0.5, 1.0)
     assert np.abs(slide).max() < 7e-9  # m: measured 1.5e-9 (the 1e-6 regularisation)
 
 
 def test_box_on_a_slope_slides_above_the_friction_angle_at_the_coulomb_rate():
-    # Sliding, friction is μ·N exactly: the box accelerates at a = g(sin θ − μ cos θ), and
-    # semi-implicit Euler moves it a·h²·k(k+1)/2 in k steps from rest; counted from the
-    # first step's position, the slide after step k is a·h²·(k(k+1)/2 − 1).  (The
-    # continuous ½at² differs by 0.2 % after 1 s: the step's first-order error.)
+    # Sliding, friction is μ·N exactly: the box accelerates at a = g(sin θ − μ cos θ) and
+    # moves by ``sliding``'s recursion.  (The continuous ½at² differs by 0.2 % after 1 s:
+    # the step's first-order error.)
     mu, t = 0.5, 1.0
-    theta, slide = slope_run(0.6, mu, t)
+    theta, slide, _ = slope_run(0.6, mu, t)
     a = G * (np.sin(theta) - mu * np.cos(theta))
-    k = np.arange(1, len(slide) + 1)
-    expected = a * SLOPE_H**2 * (k * (k + 1) / 2 - 1)
-    assert np.abs(slide - expected).max() < 6e-8  # m, of 0.42 m: measured 1.2e-8
+    assert np.abs(slide - sliding(a, len(slide))).max() < 6e-8  # m, of 0.42 m: measured 1.2e-8
 
 
 @pytest.mark.parametrize("engine", ["numpy", "compiled"])
 def test_a_frictionless_contact_has_one_row_and_lets_the_box_slide_freely(engine):
     # μ = 0: the box slides at a = g sin θ, the same recursion as above with μ = 0, and
     # each contact point makes its normal row only (no friction rows held at ±0).
-    theta, slide = slope_run(0.3, 0.0, 0.5, engine)
-    a = G * np.sin(theta)
-    k = np.arange(1, len(slide) + 1)
-    assert np.abs(slide - a * SLOPE_H**2 * (k * (k + 1) / 2 - 1)).max() < 3e-15  # m: 6.7e-16
-    spec = free_body(ShapeSpec("box", half_extents=(0.1, 0.05, 0.1)), [0, 0, 0], [0, 0.1, 0],
-                     [0.0, -G, 0.0], 0.0, SLOPE_H)  # fmt: skip
-    model = build_model(spec).with_options(engine=engine)
-    stepper = Engine(model).stepper(initial_state(model))
-    for _ in range(50):
-        report = stepper.step()
+    theta, slide, report = slope_run(0.3, 0.0, 0.5, engine)
+    assert np.abs(slide - sliding(G * np.sin(theta), len(slide))).max() < 3e-15  # m: 6.7e-16
     assert report.contacts == 4  # the box's bottom corners
     assert report.rows == report.contacts
