@@ -143,7 +143,7 @@ def pack(model: Model) -> FastModel:
         ),
     )
     g, ncontact, reason = _geometry(model)
-    tree, ptree = _forest(model)
+    tree, ptree = _forest(model, ncontact)
     o = model.options
     opt = np.zeros(Opt.SIZE)
     for entry, at in Opt.__members__.items():
@@ -238,15 +238,17 @@ def _geometry(model: Model) -> tuple[Geometry, int, str | None]:
     return g, most, reason
 
 
-def _forest(model: Model) -> tuple[Tree, ProjectionTree]:
+def _forest(model: Model, ncontact: int) -> tuple[Tree, ProjectionTree]:
     """Elimination forest of bodies and joints (solver.solve.direct_kernel), children first.
 
-    Nodes: body b (movable only), joint j as nb + j, the grip as nb + nj (placed first
-    at run time).  A component is rooted at its joint to the world (or to an immovable
-    body) when it has one, else at its first body.  Why: a row node eliminated as a
-    leaf adds C⁻¹ (10⁶/A_ii for a regularised anchor row, 10¹⁴ in the projection) to
-    its body's block and ruins that block's conditioning; as the root it is eliminated
-    last, after its bodies, as the well-conditioned Schur complement −C − J D⁻¹ Jᵀ."""
+    Nodes: body b (movable only), joint j as nb + j, the grip as nb + nj, and room for
+    ncontact leaf contacts (solver.solve.hybrid) as nb + nj + 1 + k (the grip and the
+    leaves placed first at run time, each hung from its body).  A component is rooted at
+    its joint to the world (or to an immovable body) when it has one, else at its first
+    body.  Why: a row node eliminated as a leaf adds C⁻¹ (10⁶/A_ii for a regularised
+    anchor row, 10¹⁴ in the projection) to its body's block and ruins that block's
+    conditioning; as the root it is eliminated last, after its bodies, as the
+    well-conditioned Schur complement −C − J D⁻¹ Jᵀ."""
     nb, nj = model.nbody, model.njoint
     movable = model.body_inv_mass > 0.0
     adjacent: list[list[int]] = [[] for _ in range(nb + nj + 1)]
@@ -255,7 +257,7 @@ def _forest(model: Model) -> tuple[Tree, ProjectionTree]:
             if body >= 0 and movable[body]:
                 adjacent[nb + j].append(int(body))
                 adjacent[int(body)].append(nb + j)
-    parent = np.full(nb + nj + 1, -1, np.int64)
+    parent = np.full(nb + nj + 1 + ncontact, -1, np.int64)
     seen = np.zeros(nb + nj + 1, bool)
     order: list[int] = []
     to_world = [nb + j for j in range(nj) if len(adjacent[nb + j]) < 2]
@@ -275,7 +277,7 @@ def _forest(model: Model) -> tuple[Tree, ProjectionTree]:
         order.extend(reversed(visit))
     rank = np.cumsum(model.joint_rheology) - 1
     rheo_start = np.where(model.joint_rheology, 3 * nj + 3 * rank, -1).astype(np.int64)
-    nn = nb + nj + 1
+    nn = nb + nj + 1 + ncontact
     tw = TreeWork(np.zeros((nn, 6, 6)), np.zeros((nn, 6, 6)), np.zeros((nn, 6)), np.zeros((6, 6)))
     order_arr, no_rheo = np.array(order, np.int64), np.full(nj, -1, np.int64)
     rows, size = np.zeros((nn, 6), np.int64), np.zeros(nn, np.int64)

@@ -377,12 +377,13 @@ def backward_pass(seq, nseq, parent, nb, size, tw, x, bwd, bwd_tag):
 
 
 @kernel(error_model="numpy", _nrt=False)
-def forest_sequence(tree, nb, movable, free_grip, ngrip, body, asleep, joint_bone):
+def forest_sequence(tree, nb, movable, free_grip, ngrip, body, leaves, asleep, joint_bone):
     """Fill the elimination sequence (seq, parent, rows, size of ``tree``) for the joint
     forest and, with ngrip > 0, the grip's node of the rows free_grip[:ngrip], a leaf of
     the gripped body (its own root when the body cannot move); returns its length.
-    Sleeping islands (asleep (nb,) bool) are left out: each is a whole component of the
-    forest, with no rows (solver.advance.sleep)."""
+    leaves = (rw, rows, count): leaf contacts (solver.solve.hybrid), a one-row node each,
+    hung from the row's movable body.  Sleeping islands (asleep (nb,) bool) are left out:
+    each is a whole component of the forest, with no rows (solver.advance.sleep)."""
     order, parent, rheo_start, _, seq, rows, size, _ = tree
     node = nb + len(rheo_start)
     nseq = 0
@@ -392,6 +393,12 @@ def forest_sequence(tree, nb, movable, free_grip, ngrip, body, asleep, joint_bon
         size[node] = ngrip
         for k in range(ngrip):
             rows[node, k] = free_grip[k]
+    rw, leaf_rows, nleaf = leaves
+    for k in range(nleaf):
+        r = leaf_rows[k]
+        seq[nseq], nseq = node + 1 + k, nseq + 1
+        parent[node + 1 + k] = rw.body_a[r] if rw.body_a[r] >= 0 else rw.body_b[r]
+        size[node + 1 + k], rows[node + 1 + k, 0] = 1, r
     for i in order:
         if asleep[i] if i < nb else asleep[joint_bone[i - nb]]:
             continue

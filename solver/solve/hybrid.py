@@ -2,10 +2,15 @@
 
 Rows fall into three sets:
 
-* X, solved exactly: the joints' rows (ball-joint anchors, rheology: no bounds) and the
-  grip's rows (box-bounded, compliant) while they are inside their bounds;
-* P, pinned: grip rows at a force limit, their force fixed at the bound;
-* U, iterated: contacts, their friction and joint limits, except the *dormant* ones:
+* X, solved exactly: the joints' rows (ball-joint anchors, rheology: no bounds), the
+  grip's rows (box-bounded, compliant) while they are inside their bounds, and the
+  *leaf* contacts while they push: frictionless contacts of a bone on the static world
+  (no friction cone to iterate; in the compiled solve each is a leaf of the joint
+  forest, hung from its bone);
+* P, pinned: grip rows at a force limit, their force fixed at the bound, and leaf
+  contacts that would pull (λ fixed at 0);
+* U, iterated: the other contacts, their friction and joint limits, except the
+  *dormant* ones:
   one-sided rows that did not push last step (warm λ = 0) and ask for no push now
   (bias > 0: a speculative gap, a limit not yet reached), with their friction rows.
 
@@ -21,8 +26,9 @@ stall on mass ratios along a chain as PGS on the whole table does, and the joint
 to the accuracy of the elimination however few sweeps run.  S is small and dense.
 
 After the solve the sets are checked, as in an active-set method: a dormant row with
-r < 0 (it would be crossed) wakes into U, a free grip row outside its box is pinned, a
-pinned one whose r no longer pushes against its bound is freed; then the solve repeats
+r < 0 (it would be crossed) wakes (into U, or X for a leaf contact), a free grip row or
+leaf contact outside its box is pinned, a pinned one whose r no longer pushes against its
+bound is freed; then the solve repeats
 (at most ``rounds`` times).  Dormant rows left at λ = 0 with r ≥ 0 satisfy their
 complementarity exactly, so skipping them changes nothing but the cost.
 
@@ -34,7 +40,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from solver.rows.table import KIND_GRIP, KIND_JOINT, KIND_RHEOLOGY, Rows
+from solver.rows.table import KIND_CONTACT, KIND_GRIP, KIND_JOINT, KIND_RHEOLOGY, Rows
 from solver.solve.direct import solve_spd
 from solver.solve.pgs import dense_pgs
 from solver.solve.response import dense_system
@@ -43,6 +49,16 @@ from solver.solve.response import dense_system
 def equality_rows(rows: Rows) -> np.ndarray:
     """(n,) bool: the joints' rows (anchors and rheology), always solved exactly."""
     return (rows.kind == KIND_JOINT) | (rows.kind == KIND_RHEOLOGY)
+
+
+def leaf_contacts(rows: Rows) -> np.ndarray:
+    """(n,) bool: contact rows against the static world (one side −1) with no friction
+    rows and a compliance to be eliminated with (every hard row has one once
+    regularised): solved exactly while they push."""
+    rubbing = np.zeros(len(rows), bool)
+    rubbing[rows.fric_of[rows.fric_of >= 0]] = True
+    static_side = (rows.body_a < 0) | (rows.body_b < 0)
+    return (rows.kind == KIND_CONTACT) & ~rubbing & static_side & (rows.comp > 0.0)
 
 
 def dormant_rows(rows: Rows, lam0: np.ndarray) -> np.ndarray:
@@ -104,19 +120,20 @@ def hybrid_solve(
     last round's PGS on S (0 when nothing is iterated).  ``skip_dormant`` False iterates
     the dormant rows too (the unskipped path, for measuring the skip)."""
     q, c = dense_system(rows, resp, vel_free)
-    joint, grip = equality_rows(rows), rows.kind == KIND_GRIP
+    joint, grip, leaf = equality_rows(rows), rows.kind == KIND_GRIP, leaf_contacts(rows)
+    node = grip | leaf  # exact while inside their bounds, pinned at a bound otherwise
     dormant = dormant_rows(rows, lam0) & ~grip & skip_dormant
     at_lo, at_hi = np.zeros(len(rows), bool), np.zeros(len(rows), bool)
     for _ in range(rounds):
         pinned_lam = np.where(at_lo, rows.lo, np.where(at_hi, rows.hi, np.nan))
-        exact = joint | (grip & ~at_lo & ~at_hi)
-        it = ~joint & ~grip & ~dormant
+        exact = joint | (node & ~at_lo & ~at_hi & ~dormant)
+        it = ~joint & ~node & ~dormant
         lam, sweeps, residual = _round(rows, q, c, lam0, exact, it, pinned_lam, iterations, tol)
         r = q @ lam + c
         crossed = dormant & (rows.fric_of < 0) & (r < 0.0)
         woke = crossed | ((rows.fric_of >= 0) & crossed[np.maximum(rows.fric_of, 0)])
         release = (at_hi & (r > 0.0)) | (at_lo & (r < 0.0))
-        free = grip & ~at_lo & ~at_hi
+        free = node & ~at_lo & ~at_hi & ~dormant
         leave_lo, leave_hi = free & (lam < rows.lo), free & (lam > rows.hi)
         if not (woke.any() or release.any() or leave_lo.any() or leave_hi.any()):
             return lam, sweeps, residual

@@ -1,17 +1,20 @@
-"""Compiled hybrid solve (solver.solve.hybrid): joints and grip exact by the tree, the active
-bounded rows by PGS on their Schur complement, dormant rows checked afterwards.
+"""Compiled hybrid solve (solver.solve.hybrid): joints, grip and leaf contacts exact by the
+tree, the other active bounded rows by PGS on their Schur complement, dormant rows checked
+afterwards.
 
-The joints' rows are the first ``ne`` rows of the table; grip rows are rows grip0 …
-grip0 + ngrip − 1 (a node of the forest while inside their bounds, pinned at a bound
-otherwise, as in the direct solve); every other row is iterated (U) or dormant (solver.
-hybrid.dormant_rows).  With the forest factored once per round (tree_factor), each U
-row r costs one substitution: the body right-hand side J_rᵀ gives every body's velocity
-change per unit λ_r with the joints and grip holding, so S[:, r] = J_U y⁽ʳ⁾ + C_r e_r; it
-runs forward only on the root paths of r's bodies and backward only on those of the U
-rows' bodies.  The base substitution (U forces zero) gives s = J_U (v_free + y⁽⁰⁾) + β_U.
-After PGS on S (solver.solve.pgs.dense_pgs), one more substitution with the U forces folded
-into v_free gives λ of the exact rows and the velocities.  Without U rows one
-substitution does it all.
+The joints' rows are the first ``ne`` rows of the table; grip rows are rows grip0 … grip0 +
+ngrip − 1 (a node of the forest while inside their bounds, pinned at a bound otherwise, as
+in the direct solve); a leaf contact (``leaf_contacts``: frictionless, against the static
+world) is a one-row node hung from its bone while it pushes, pinned at λ = 0 otherwise (the
+static side adds no edge, so the forest stays a forest); every other row is iterated (U) or
+dormant (solver.hybrid.dormant_rows). With the forest factored once per round
+(tree_factor), each U row r costs one substitution: the body right-hand side J_rᵀ gives
+every body's velocity change per unit λ_r with the joints and grip holding, so S[:, r] =
+J_U y⁽ʳ⁾ + C_r e_r; it runs forward only on the root paths of r's bodies and backward only
+on those of the U rows' bodies. The base substitution (U forces zero) gives s = J_U (v_free
++ y⁽⁰⁾) + β_U. After PGS on S (solver.solve.pgs.dense_pgs), one more substitution with the
+U forces folded into v_free gives λ of the exact rows and the velocities. Without U rows
+one substitution does it all.
 """
 
 from __future__ import annotations
@@ -22,7 +25,7 @@ import numpy as np
 
 from solver.compiled.flat import square
 from solver.jit import kernel
-from solver.rows.table import KIND_GRIP
+from solver.rows.table import KIND_CONTACT, KIND_GRIP
 from solver.solve import hybrid
 from solver.solve.direct_kernel import (
     ALL,
@@ -172,12 +175,15 @@ def _iterated_large(rw, its, nu, seq, nseq, parent, nb, size, tw, movable, lam0,
 def _round(bw, tree, h, rw, lam, vel_p, its, nu, grips, lam0, iters, asleep, sv, vel):
     """One solve with the current sets into lam and vel: (ok, sweeps, residual).
     bw: the solvers' model arrays (solver.solve.dispatch_kernel.solve); grips = (free grip rows,
-    their count, the gripped body); sv: the solvers' scratch (kernel.step_arrays)."""
+    their count, the gripped body, the free leaf contacts' rows, their count); sv: the
+    solvers' scratch (kernel.step_arrays)."""
     _, parent, _, _, seq, rows, size, tw = tree
     joint_bone, mass, movable, resp_a, resp_b, _, inertia_w = bw
     nb = len(vel_p)
-    free_grip, ngrip, body = grips
-    nseq = forest_sequence(tree, nb, movable, free_grip, ngrip, body, asleep, joint_bone)
+    free_grip, ngrip, body, leaves, nleaf = grips
+    nseq = forest_sequence(
+        tree, nb, movable, free_grip, ngrip, body, (rw, leaves, nleaf), asleep, joint_bone
+    )
     init_nodes(seq, nseq, nb, rw, vel_p, h, mass, inertia_w, rows, size, tw.block, tw.rhs)
     if not tree_factor(seq, nseq, parent, nb, rw, rows, size, tw):
         return False, 0, 0.0
@@ -216,7 +222,7 @@ def hybrid_solve(bw, tree, h, rw, n, ne, vel_free, lam0, iterations, grip, skip,
     only) this is the direct solve's active set on the grip (kernel.direct)."""
     grip0, ngrip, body = grip
     resp_a, resp_b = bw.resp_a, bw.resp_b
-    (at_lo, at_hi, dormant), (its, pinned, _, _, _, _, free_grip) = sv.flags, sv.ints
+    (at_lo, at_hi, dormant, leaf), (its, pinned, _, _, _, _, free_grip, leaves) = sv.flags, sv.ints
     vel_p = sv.vel_p
     if skip:
         dormant_rows(rw, n, lam0, dormant)
@@ -224,38 +230,61 @@ def hybrid_solve(bw, tree, h, rw, n, ne, vel_free, lam0, iterations, grip, skip,
         at_lo[i], at_hi[i], lam[i] = False, False, 0.0
         if not skip:
             dormant[i] = False
+    leaf_contacts(rw, ne, n, bw.inv_mass, asleep, leaf)
     lo, hi, kind = rw.lo, rw.hi, rw.kind
     sweeps, residual = 0, 0.0
     for _ in range(rounds):
-        nu, nfree, npin = 0, 0, 0
+        nu, nfree, nleaf, npin = 0, 0, 0, 0
         for i in range(ne, n):
             lam[i] = lo[i] if at_lo[i] else hi[i] if at_hi[i] else 0.0
-            if at_lo[i] or at_hi[i]:
+            held = at_lo[i] or at_hi[i]
+            if held:
                 pinned[npin], npin = i, npin + 1
             if kind[i] == KIND_GRIP:
-                if not (at_lo[i] or at_hi[i]):
+                if not held:
                     free_grip[nfree], nfree = i, nfree + 1
+            elif leaf[i]:
+                if not (held or dormant[i]):
+                    leaves[nleaf], nleaf = i, nleaf + 1
             elif not dormant[i]:
                 its[nu], nu = i, nu + 1
         copy6(vel_free, vel_p)
         apply_listed(rw, pinned, npin, resp_a, resp_b, lam, vel_p)  # (most rounds: none)
         ok, sweeps, residual = _round(
-            bw, tree, h, rw, lam, vel_p, its, nu, (free_grip, nfree, body), lam0, iterations,
-            asleep, sv, vel,
+            bw, tree, h, rw, lam, vel_p, its, nu, (free_grip, nfree, body, leaves, nleaf), lam0,
+            iterations, asleep, sv, vel,
         )  # fmt: skip
         if not ok:
             return 2, 0, 0.0
-        if not _update_sets(rw, ne, n, lam, vel, grip0, ngrip, dormant, at_lo, at_hi):
+        if not _update_sets(rw, ne, n, lam, vel, grip0, ngrip, leaf, dormant, at_lo, at_hi):
             return 0, sweeps, residual
     for i in range(n):
         lam[i] = min(max(lam[i], lo[i]), hi[i])
     return 1, sweeps, residual
 
 
+@kernel(error_model="numpy", inline="always")
+def leaf_contacts(rw, ne, n, movable, asleep, leaf):
+    """leaf[ne:n] ← solver.solve.hybrid.leaf_contacts, and the bone on the other side
+    awake and movable (the forest hangs the row from it)."""
+    for i in range(ne, n):
+        leaf[i] = True
+    for i in range(ne, n):
+        if rw.fric_of[i] >= 0:
+            leaf[rw.fric_of[i]] = False
+    for i in range(ne, n):
+        a, b = rw.body_a[i], rw.body_b[i]
+        bone = a if b < 0 else b if a < 0 else -1
+        leaf[i] = (
+            leaf[i] and rw.kind[i] == KIND_CONTACT and rw.comp[i] > 0.0 and bone >= 0
+            and movable[bone] > 0.0 and not asleep[bone]
+        )  # fmt: skip
+
+
 @kernel(error_model="numpy")
-def _update_sets(rw, ne, n, lam, vel, grip0, ngrip, dormant, at_lo, at_hi):
-    """Wake crossed dormant rows (and their friction), pin and free grip rows; True when
-    anything changed.
+def _update_sets(rw, ne, n, lam, vel, grip0, ngrip, leaf, dormant, at_lo, at_hi):
+    """Wake crossed dormant rows (and their friction), pin and free grip rows and leaf
+    contacts; True when anything changed.
 
     The row arrays are taken out of the table once: an array read from a tuple inside an
     and/or costs two uncancelled reference counts each time (~300 ns, numba 0.68)."""
@@ -265,7 +294,7 @@ def _update_sets(rw, ne, n, lam, vel, grip0, ngrip, dormant, at_lo, at_hi):
         r = row_velocity(rw, i, vel) + comp[i] * lam[i] + bias[i]
         if dormant[i] and fric[i] < 0 and r < 0.0:
             dormant[i], changed = False, True
-        elif grip0 <= i < grip0 + ngrip:
+        elif grip0 <= i < grip0 + ngrip or leaf[i]:
             if (at_hi[i] and r > 0.0) or (at_lo[i] and r < 0.0):
                 at_lo[i], at_hi[i], changed = False, False, True
             elif not (at_lo[i] or at_hi[i]) and (lam[i] < lo[i] or lam[i] > hi[i]):

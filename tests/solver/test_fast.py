@@ -35,7 +35,7 @@ from solver.rows.grip import Pointer, make_coupling
 from solver.rows.pin import make_pin
 from solver.solve import hybrid
 from solver.solve.hybrid_kernel import NU_CAP
-from solver.spec import BoneSpec, GroundSpec, RigSpec, ShapeSpec
+from solver.spec import BoneSpec, GroundSpec, LimitSpec, RigSpec, ShapeSpec
 from solver.state import StepInput, initial_state
 
 DOLL = Path(__file__).resolve().parents[2] / "rigs" / "doll.yaml"
@@ -294,6 +294,33 @@ def test_more_iterated_rows_than_the_scratch_holds_matches(monkeypatch):
     reports = lockstep(model, initial_state(model), [None] * 40)
     assert {r.solver for r in reports} == {"hybrid"}
     assert min(sizes) > NU_CAP and len(sizes) == 40
+
+
+def test_chain_tumbling_onto_a_frictionless_ground_matches(monkeypatch):
+    # Frictionless balls: each one's contact with the ground is a leaf contact of the
+    # compiled forest (solver.solve.hybrid), the contacts between balls and the limits
+    # are iterated.  The chain starts 5 mm into the ground, thrown up and spinning: the
+    # exact solve would pull on the ground contacts of balls leaving it, which both
+    # solves then hold at λ = 0; then it lands and tumbles on the ground.
+    pinned = []  # per numpy round: a leaf contact held at λ = 0
+    round_ = hybrid._round
+
+    def watched(rows, q, c, lam0, exact, it, pinned_lam, *args):
+        pinned.append(bool((hybrid.leaf_contacts(rows) & ~np.isnan(pinned_lam)).any()))
+        return round_(rows, q, c, lam0, exact, it, pinned_lam, *args)
+
+    monkeypatch.setattr(hybrid, "_round", watched)
+    spec = chain(4, 0.005, root_mode="free", lengths=[0.12, 0.08, 0.15, 0.1], radius=0.03,
+                 shape="sphere", collide=True, ground=0.975,
+                 limits=LimitSpec(swing=np.radians(20.0), twist=(-0.1, 0.1)))  # fmt: skip
+    spec = replace(spec, ground=replace(spec.ground, friction=0.0), bone_friction=0.0)
+    model = build_model(spec)
+    rng = np.random.default_rng(1)
+    state = replace(initial_state(model), body_vel=np.tile([0.0, 2.0, 0.0], (4, 1)),
+                    body_omega=rng.normal(scale=2.0, size=(4, 3)))  # fmt: skip
+    reports = lockstep(model, state, [None] * 120)
+    assert max(r.contacts for r in reports) >= 4
+    assert sum(pinned) > 0  # measured: 2 of the numpy solve's 131 rounds
 
 
 def test_substepped_rope_matches():

@@ -16,8 +16,8 @@ from solver import quat
 from solver.model import build_model
 from solver.pipeline import step
 from solver.rows.grip import Pointer, make_coupling
-from solver.rows.table import KIND_GRIP
-from solver.solve.hybrid import dormant_rows, equality_rows, hybrid_solve
+from solver.rows.table import KIND_FRICTION, KIND_GRIP, take_rows
+from solver.solve.hybrid import dormant_rows, equality_rows, hybrid_solve, leaf_contacts
 from solver.solve.pgs import dense_pgs
 from solver.solve.reference import reference_solve
 from solver.solve.response import dense_system
@@ -55,6 +55,55 @@ def test_hybrid_with_friction_solves_the_lcp(seed):
     lam, _, residual = hybrid_solve(rows, resp, vel_free, np.zeros(len(rows)), 20_000)
     assert lcp_violation(q, c, lam, rows) < 5e-12  # measured ≤ 1.0e-12 over the 8 seeds
     assert residual < 5e-12
+
+
+def without_friction(rows, resp):
+    """The table and responses without friction rows: frictionless contacts."""
+    keep = rows.kind != KIND_FRICTION
+    return take_rows(rows, keep), (resp[0][keep], resp[1][keep])
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_frictionless_ground_contacts_are_solved_exactly_with_the_joints(seed):
+    # Without friction rows each ball's contact with the ground is a leaf contact,
+    # eliminated with the joints; the contacts between balls and the limits are iterated.
+    model, state = contact_scene(seed)
+    rows, resp, vel_free, _ = problem(model, state)
+    rows, resp = without_friction(rows, resp)
+    leaf = leaf_contacts(rows)
+    assert leaf.any() and not leaf[equality_rows(rows)].any()
+    q, c = dense_system(rows, resp, vel_free)
+    lam_ref = reference_solve(q, c, rows.lo, rows.hi, rows.fric_of, rows.mu)
+    lam, _, _ = hybrid_solve(rows, resp, vel_free, np.zeros(len(rows)), 2000)
+    vel, vel_ref = (velocities(rows, resp, vel_free, x) for x in (lam, lam_ref))
+    assert np.abs(vel - vel_ref).max() < 1e-8  # measured ≤ 2.0e-9
+    # One sweep: the pushing leaf contacts hold exactly, as the joints do, whatever λ_U.
+    lam, _, _ = hybrid_solve(rows, resp, vel_free, np.zeros(len(rows)), 1)
+    push = leaf & (lam > 0.0)
+    r = q @ lam + c
+    assert push.any() and (lam[leaf] >= 0.0).all()
+    assert np.abs(r[push]).max() < 1e-16 * np.abs(c).max()  # measured ≤ 5.0e-18
+
+
+def test_a_leaf_contact_that_would_pull_is_held_at_zero():
+    # A ball 1 mm into a frictionless ground, leaving it at 1 m/s: its contact is not
+    # dormant (it asks for a push out of the ground), but the exact solve would pull the
+    # ball back (λ < 0); the contact is pinned at λ = 0 and the ball flies on.
+    ball = ShapeSpec("sphere", radius=0.05)
+    model = free_bodies([(ball, np.array([0.0, 0.044, 0.0]), np.array([0.0, 0.054, 0.0]))],
+                        0.005, gravity=True, ground=True)  # fmt: skip
+    state = replace(initial_state(model), body_vel=np.array([[0.0, 1.0, 0.0]]))
+    rows, resp, vel_free, ncontact = problem(model, state)
+    rows, resp = without_friction(rows, resp)
+    assert ncontact == 1 and leaf_contacts(rows).all() and rows.bias[0] < 0.0
+    lam0 = np.zeros(len(rows))
+    assert not dormant_rows(rows, lam0).any()
+    q, c = dense_system(rows, resp, vel_free)
+    assert -c[0] / q[0, 0] < 0.0  # the exact row alone would pull
+    lam_ref = reference_solve(q, c, rows.lo, rows.hi, rows.fric_of, rows.mu)
+    lam, _, _ = hybrid_solve(rows, resp, vel_free, lam0, 200)
+    assert lam[0] == 0.0 == lam_ref[0]
+    assert np.array_equal(velocities(rows, resp, vel_free, lam), vel_free)
 
 
 @pytest.mark.parametrize("sweeps", [1, 3, 15])
