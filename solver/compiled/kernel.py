@@ -136,9 +136,11 @@ def step_arrays(nb, nj, rows, nodes):
     them every step; a Sim once, kept in its flat buffers (layout.SimArrays)."""
     b, i = np.bool_, np.int64
     solvers = SolverScratch(
-        SolverFlags(np.empty(rows, b), np.empty(rows, b), np.empty(rows, b), np.empty(rows, b)),
+        SolverFlags(np.empty(rows, b), np.empty(rows, b), np.empty(rows, b), np.empty(rows, b),
+                    np.empty(rows, b)),
         SolverIndex(np.empty(rows, i), np.empty(rows, i), np.empty(rows, i), np.empty(rows, i),
-                    np.empty(nodes, i), np.empty(nodes, i), np.empty(6, i), np.empty(rows, i)),
+                    np.empty(nodes, i), np.empty(nodes, i), np.empty(6, i), np.empty(rows, i),
+                    np.empty(rows, i)),
         SolverValues(np.empty(rows), np.empty(rows), np.empty(rows), np.empty(rows),
                      np.empty(rows), np.empty(rows), np.empty(rows)),
         np.empty((nb, 6)), np.empty((nb, 6)), np.empty(NU_CAP * NU_CAP),

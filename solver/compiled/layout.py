@@ -211,14 +211,14 @@ ReportFloat = offsets("ReportFloat", [
 # -- a step's scratch arrays (kernel.step_arrays) ----------------------------------------
 
 SolverFlags = structure("SolverFlags", ("flags",), [
-    ("at_lo", "b"), ("at_hi", "b"), ("dormant", "b"), ("leaf", "b"),
+    ("at_lo", "b"), ("at_hi", "b"), ("dormant", "b"), ("leaf", "b"), ("sliding", "b"),
 ])  # fmt: skip
 
 SolverIndex = structure("SolverIndex", ("ints",), [
     ("its", "i"), ("pinned", "i"), ("local", "i"), ("fric", "i"),  # rows
     ("path", "i"), ("needed", "i"),  # nodes
     ("free_grip", "i"),  # 6
-    ("leaves", "i"),  # rows
+    ("leaves", "i"), ("rub", "i"),  # rows
 ])  # fmt: skip
 
 SolverValues = structure("SolverValues", ("values",), [

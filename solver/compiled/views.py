@@ -268,6 +268,7 @@ def solver_flags_view(flat, k):
         leaf_b(flat, k + 1),  # at_hi
         leaf_b(flat, k + 2),  # dormant
         leaf_b(flat, k + 3),  # leaf
+        leaf_b(flat, k + 4),  # sliding
     )
 
 
@@ -282,6 +283,7 @@ def solver_index_view(flat, k):
         leaf_i(flat, k + 5),  # needed
         leaf_i(flat, k + 6),  # free_grip
         leaf_i(flat, k + 7),  # leaves
+        leaf_i(flat, k + 8),  # rub
     )
 
 
@@ -302,11 +304,11 @@ def solver_values_view(flat, k):
 def solver_scratch_view(flat, k):
     return SolverScratch(
         solver_flags_view(flat, k + 0),  # flags
-        solver_index_view(flat, k + 4),  # ints
-        solver_values_view(flat, k + 12),  # values
-        leaf_f6(flat, k + 19),  # vel_p
-        leaf_f6(flat, k + 20),  # pushed
-        leaf_f(flat, k + 21),  # s_mat
+        solver_index_view(flat, k + 5),  # ints
+        solver_values_view(flat, k + 14),  # values
+        leaf_f6(flat, k + 21),  # vel_p
+        leaf_f6(flat, k + 22),  # pushed
+        leaf_f(flat, k + 23),  # s_mat
     )
 
 
@@ -362,12 +364,12 @@ def scratch_view(flat, k):
         limit_scratch_view(flat, k + 12),  # limit
         leaf_b(flat, k + 14),  # flows
         solver_scratch_view(flat, k + 15),  # solvers
-        prediction_view(flat, k + 37),  # pred
-        leaf_f6(flat, k + 43),  # moving
-        leaf_f(flat, k + 44),  # stage_opt
-        leaf_f(flat, k + 45),  # part_opt
-        leaf_f(flat, k + 46),  # part_pointer
-        leaf_f(flat, k + 47),  # part_report
+        prediction_view(flat, k + 39),  # pred
+        leaf_f6(flat, k + 45),  # moving
+        leaf_f(flat, k + 46),  # stage_opt
+        leaf_f(flat, k + 47),  # part_opt
+        leaf_f(flat, k + 48),  # part_pointer
+        leaf_f(flat, k + 49),  # part_report
     )
 
 
@@ -384,8 +386,8 @@ def warm_view(flat, k):
 def step_work_view(flat, k):
     return StepWork(
         scratch_view(flat, k + 0),  # scratch
-        leaf_i(flat, k + 48),  # keys
-        leaf_f(flat, k + 49),  # lam
+        leaf_i(flat, k + 50),  # keys
+        leaf_f(flat, k + 51),  # lam
     )
 
 
@@ -399,7 +401,7 @@ def sim_arrays_view(flat, k):
         leaf_i(flat, k + 143),  # rep_i
         leaf_f(flat, k + 144),  # rep_f
         step_work_view(flat, k + 145),  # work
-        state_set_view(flat, k + 195),  # spare
-        leaf_i(flat, k + 212),  # spare_keys
-        leaf_f(flat, k + 213),  # spare_lam
+        state_set_view(flat, k + 197),  # spare
+        leaf_i(flat, k + 214),  # spare_keys
+        leaf_f(flat, k + 215),  # spare_lam
     )

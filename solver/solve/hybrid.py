@@ -4,15 +4,15 @@ Rows fall into three sets:
 
 * X, solved exactly: the joints' rows (ball-joint anchors, rheology: no bounds), the
   grip's rows (box-bounded, compliant) while they are inside their bounds, and the
-  *leaf* contacts while they push: frictionless contacts of a bone on the static world
-  (no friction cone to iterate; in the compiled solve each is a leaf of the joint
-  forest, hung from its bone);
-* P, pinned: grip rows at a force limit, their force fixed at the bound, and leaf
-  contacts that would pull (λ fixed at 0);
-* U, iterated: the other contacts, their friction and joint limits, except the
-  *dormant* ones:
-  one-sided rows that did not push last step (warm λ = 0) and ask for no push now
-  (bias > 0: a speculative gap, a limit not yet reached), with their friction rows.
+  *leaf* contacts while they push and stick: the contacts of a bone on the static world,
+  their normal row and friction rows together (in the compiled solve each is a leaf of
+  the joint forest, hung from its bone);
+* P, pinned: grip rows at a force limit, their force fixed at the bound, and
+  frictionless leaf contacts that would pull (λ fixed at 0);
+* U, iterated: the other contacts (between bones), the leaf contacts that slide, their
+  friction and joint limits, except the *dormant* ones: one-sided rows that did not push
+  last step (warm λ = 0) and ask for no push now (bias > 0: a speculative gap, a limit not
+  yet reached), with their friction rows.
 
 With r = Qλ + c (Q = A + diag(C), solver.solve.response.dense_system) and the pinned forces
 folded into c, r_X = 0 holds exactly by λ_X = −Q_XX⁻¹ (c_X + Q_XU λ_U), which leaves
@@ -25,12 +25,17 @@ Gauss–Seidel on S (solver.solve.pgs.dense_pgs, warm-started, ``iterations`` sw
 stall on mass ratios along a chain as PGS on the whole table does, and the joints hold
 to the accuracy of the elimination however few sweeps run.  S is small and dense.
 
-After the solve the sets are checked, as in an active-set method: a dormant row with
-r < 0 (it would be crossed) wakes (into U, or X for a leaf contact), a free grip row or
-leaf contact outside its box is pinned, a pinned one whose r no longer pushes against its
-bound is freed; then the solve repeats
-(at most ``rounds`` times).  Dormant rows left at λ = 0 with r ≥ 0 satisfy their
-complementarity exactly, so skipping them changes nothing but the cost.
+After the solve the sets are checked, as in an active-set method: a dormant row with r < 0
+(it would be crossed) wakes (into U, or X for a leaf contact), a free grip row or
+frictionless leaf contact outside its box is pinned, a pinned one whose r no longer pushes
+against its bound is freed, and a sticking leaf contact whose friction leaves its pyramid
+(|λ_t| > μ λ_n), or that would pull (held in the tangent plane, the exact solve can pull
+on a contact that sliding would keep pressed), slides: it is iterated for the rest of the
+step (one way, so the sets cannot cycle); then the solve repeats (at most ``rounds``
+times). Dormant rows left at λ = 0 with r ≥ 0 satisfy their complementarity exactly, so
+skipping them changes nothing but the cost. When the sets settle every row's conditions
+hold: the exact rows have r = 0 inside their bounds, the pinned ones sit at a bound they
+push against, and PGS solves the rest.
 
 This is the readable version; solver.compiled.fast does the same with the joint tree's
 linear-time elimination in place of the dense Q_XX factorisation.
@@ -51,14 +56,20 @@ def equality_rows(rows: Rows) -> np.ndarray:
     return (rows.kind == KIND_JOINT) | (rows.kind == KIND_RHEOLOGY)
 
 
+def contact_of(rows: Rows) -> np.ndarray:
+    """(n,) int: each friction row's normal row, every other row itself."""
+    return np.where(rows.fric_of >= 0, rows.fric_of, np.arange(len(rows)))
+
+
 def leaf_contacts(rows: Rows) -> np.ndarray:
-    """(n,) bool: contact rows against the static world (one side −1) with no friction
-    rows and a compliance to be eliminated with (every hard row has one once
-    regularised): solved exactly while they push."""
-    rubbing = np.zeros(len(rows), bool)
-    rubbing[rows.fric_of[rows.fric_of >= 0]] = True
+    """(n,) bool: the rows (normal and friction) of the contacts against the static world
+    (one side −1) whose rows all have a compliance to be eliminated with (every hard row
+    has one once regularised): solved exactly while they push and stick."""
+    own = contact_of(rows)
     static_side = (rows.body_a < 0) | (rows.body_b < 0)
-    return (rows.kind == KIND_CONTACT) & ~rubbing & static_side & (rows.comp > 0.0)
+    leaf = (rows.kind == KIND_CONTACT) & static_side
+    np.logical_and.at(leaf, own, rows.comp > 0.0)
+    return leaf[own]
 
 
 def dormant_rows(rows: Rows, lam0: np.ndarray) -> np.ndarray:
@@ -121,22 +132,30 @@ def hybrid_solve(
     the dormant rows too (the unskipped path, for measuring the skip)."""
     q, c = dense_system(rows, resp, vel_free)
     joint, grip, leaf = equality_rows(rows), rows.kind == KIND_GRIP, leaf_contacts(rows)
-    node = grip | leaf  # exact while inside their bounds, pinned at a bound otherwise
+    own = contact_of(rows)
+    rubbing = np.zeros(len(rows), bool)  # normal rows with friction rows
+    rubbing[own[rows.fric_of >= 0]] = True
     dormant = dormant_rows(rows, lam0) & ~grip & skip_dormant
-    at_lo, at_hi = np.zeros(len(rows), bool), np.zeros(len(rows), bool)
+    at_lo, at_hi = np.zeros(len(rows), bool), np.zeros(len(rows), bool)  # (a leaf: its normal)
+    sliding = np.zeros(len(rows), bool)  # leaf contacts iterated for the rest of the step
     for _ in range(rounds):
         pinned_lam = np.where(at_lo, rows.lo, np.where(at_hi, rows.hi, np.nan))
-        exact = joint | (node & ~at_lo & ~at_hi & ~dormant)
-        it = ~joint & ~node & ~dormant
+        stuck = leaf & ~sliding[own] & ~at_lo[own] & ~dormant
+        exact = joint | (grip & ~at_lo & ~at_hi & ~dormant) | stuck
+        it = ~joint & ~grip & ~dormant & (~leaf | sliding[own])
         lam, sweeps, residual = _round(rows, q, c, lam0, exact, it, pinned_lam, iterations, tol)
         r = q @ lam + c
         crossed = dormant & (rows.fric_of < 0) & (r < 0.0)
-        woke = crossed | ((rows.fric_of >= 0) & crossed[np.maximum(rows.fric_of, 0)])
+        woke = crossed[own]
         release = (at_hi & (r > 0.0)) | (at_lo & (r < 0.0))
-        free = node & ~at_lo & ~at_hi & ~dormant
-        leave_lo, leave_hi = free & (lam < rows.lo), free & (lam > rows.hi)
-        if not (woke.any() or release.any() or leave_lo.any() or leave_hi.any()):
+        free = (grip & ~at_lo & ~at_hi & ~dormant) | (stuck & (rows.fric_of < 0))
+        leave_lo, leave_hi = free & (lam < rows.lo) & ~rubbing, free & (lam > rows.hi)
+        slip = stuck & (rows.fric_of >= 0) & (np.abs(lam) > rows.mu * lam[own])
+        slides = free & (lam < rows.lo) & rubbing  # (held in the tangent, it would pull)
+        slides[own[slip]] = True
+        if not (woke.any() or release.any() or leave_lo.any() or leave_hi.any() or slides.any()):
             return lam, sweeps, residual
+        sliding |= slides
         dormant &= ~woke
         at_lo, at_hi = (at_lo & ~release) | leave_lo, (at_hi & ~release) | leave_hi
     return np.clip(lam, rows.lo, rows.hi), sweeps, residual

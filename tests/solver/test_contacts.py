@@ -113,19 +113,21 @@ def sliding(a: float, steps: int) -> np.ndarray:
     return a * SLOPE_H**2 * (k * (k + 1) / 2 - 1)
 
 
-def test_box_on_a_slope_sticks_below_the_friction_angle():
-    _, slide, _ = slope_run(0.4, 0.5, 1.0)
-    assert np.abs(slide).max() < 7e-9  # m: measured 1.5e-9 (the 1e-6 regularisation)
+@pytest.mark.parametrize("engine", ["numpy", "compiled"])
+def test_box_on_a_slope_sticks_below_the_friction_angle(engine):
+    _, slide, _ = slope_run(0.4, 0.5, 1.0, engine)
+    assert np.abs(slide).max() < 7e-9  # m: measured 1.6e-9, both (the 1e-6 regularisation)
 
 
-def test_box_on_a_slope_slides_above_the_friction_angle_at_the_coulomb_rate():
+@pytest.mark.parametrize("engine", ["numpy", "compiled"])
+def test_box_on_a_slope_slides_above_the_friction_angle_at_the_coulomb_rate(engine):
     # Sliding, friction is μ·N exactly: the box accelerates at a = g(sin θ − μ cos θ) and
     # moves by ``sliding``'s recursion.  (The continuous ½at² differs by 0.2 % after 1 s:
     # the step's first-order error.)
     mu, t = 0.5, 1.0
-    theta, slide, _ = slope_run(0.6, mu, t)
+    theta, slide, _ = slope_run(0.6, mu, t, engine)
     a = G * (np.sin(theta) - mu * np.cos(theta))
-    assert np.abs(slide - sliding(a, len(slide))).max() < 6e-8  # m, of 0.42 m: measured 1.2e-8
+    assert np.abs(slide - sliding(a, len(slide))).max() < 6e-8  # m, of 0.42 m: 1.2e-8, both
 
 
 @pytest.mark.parametrize("engine", ["numpy", "compiled"])

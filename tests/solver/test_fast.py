@@ -35,7 +35,7 @@ from solver.rows.grip import Pointer, make_coupling
 from solver.rows.pin import make_pin
 from solver.solve import hybrid
 from solver.solve.hybrid_kernel import NU_CAP
-from solver.spec import BoneSpec, GroundSpec, LimitSpec, RigSpec, ShapeSpec
+from solver.spec import BoneSpec, GroundSpec, LimitSpec, PropSpec, RigSpec, ShapeSpec
 from solver.state import StepInput, initial_state
 
 DOLL = Path(__file__).resolve().parents[2] / "rigs" / "doll.yaml"
@@ -273,9 +273,15 @@ def test_steps_without_input_between_grips_match():
 
 
 def lying_chain(links: int = 30, iterations: int = 100):
-    """A free chain of balls lying on the ground: a resting contact each."""
-    spec = chain(links, 0.001, root_mode="free", ground=0.98, collide=True, shape="sphere")
-    return build_model(spec).with_options(iterations=iterations)
+    """(model, state): a free chain of balls lying on a slab (a dynamic prop) that rests
+    on the ground: a resting contact each between two moving bodies, iterated (the
+    slab's four contacts with the ground are leaf contacts: solver.solve.hybrid)."""
+    spec = chain(links, 0.001, root_mode="free", ground=0.94, collide=True, shape="sphere")
+    slab = PropSpec("slab", ShapeSpec("box", half_extents=(0.1 * links / 2 + 0.1, 0.02, 0.1)),
+                    np.array([0.1 * links / 2, 0.96, 0.0]), quat.IDENTITY.copy(), dynamic=True,
+                    mass=50.0)  # fmt: skip
+    model = build_model(replace(spec, props=(slab,))).with_options(iterations=iterations)
+    return model, initial_state(model)
 
 
 def test_more_iterated_rows_than_the_scratch_holds_matches(monkeypatch):
@@ -290,8 +296,8 @@ def test_more_iterated_rows_than_the_scratch_holds_matches(monkeypatch):
         return dense_pgs(q, c, *args)
 
     monkeypatch.setattr(hybrid, "dense_pgs", counted)
-    model = lying_chain()
-    reports = lockstep(model, initial_state(model), [None] * 40)
+    model, state = lying_chain()
+    reports = lockstep(model, state, [None] * 40)
     assert {r.solver for r in reports} == {"hybrid"}
     assert min(sizes) > NU_CAP and len(sizes) == 40
 

@@ -56,8 +56,7 @@ def _boxes():
 
 
 def _lying_chain():
-    model = lying_chain()
-    return model, initial_state(model), [None] * 10
+    return (*lying_chain(), [None] * 10)
 
 
 SCENES = {

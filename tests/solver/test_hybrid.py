@@ -17,6 +17,7 @@ from solver.model import build_model
 from solver.pipeline import step
 from solver.rows.grip import Pointer, make_coupling
 from solver.rows.table import KIND_FRICTION, KIND_GRIP, take_rows
+from solver.solve import hybrid
 from solver.solve.hybrid import dormant_rows, equality_rows, hybrid_solve, leaf_contacts
 from solver.solve.pgs import dense_pgs
 from solver.solve.reference import reference_solve
@@ -83,6 +84,36 @@ def test_frictionless_ground_contacts_are_solved_exactly_with_the_joints(seed):
     r = q @ lam + c
     assert push.any() and (lam[leaf] >= 0.0).all()
     assert np.abs(r[push]).max() < 1e-16 * np.abs(c).max()  # measured ≤ 5.0e-18
+
+
+def test_sticking_ground_contacts_are_solved_exactly_with_the_joints(monkeypatch):
+    # With friction, a ball's contact with the ground is a leaf contact while it sticks:
+    # its normal and friction rows are eliminated with the joints, so after one sweep
+    # they hold exactly (r = 0) inside the friction pyramid, whatever λ_U.  (The
+    # tumbling balls slide on some scenes: 5 of the 8 have sticking contacts.)
+    exact_sets = []
+    round_ = hybrid._round
+
+    def watched(rows, q, c, lam0, exact, *args):
+        exact_sets.append(exact)
+        return round_(rows, q, c, lam0, exact, *args)
+
+    monkeypatch.setattr(hybrid, "_round", watched)
+    sticking = 0
+    for seed in range(8):
+        rows, resp, vel_free, _ = problem(*contact_scene(seed))
+        assert (rows.kind == KIND_FRICTION).any()
+        q, c = dense_system(rows, resp, vel_free)
+        lam, _, _ = hybrid_solve(rows, resp, vel_free, np.zeros(len(rows)), 1)
+        stuck = exact_sets[-1] & leaf_contacts(rows)
+        r = q @ lam + c
+        assert np.abs(r[stuck]).max(initial=0.0) < 1e-16 * np.abs(c).max()  # ≤ 1.8e-17
+        normal = np.where(rows.fric_of >= 0, rows.fric_of, np.arange(len(rows)))
+        rubbing = stuck & (rows.fric_of >= 0)
+        assert (lam[stuck & (rows.fric_of < 0)] > 0.0).all()
+        assert (np.abs(lam[rubbing]) <= rows.mu[rubbing] * lam[normal[rubbing]]).all()
+        sticking += stuck.any()
+    assert sticking >= 4
 
 
 def test_a_leaf_contact_that_would_pull_is_held_at_zero():
