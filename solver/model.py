@@ -59,7 +59,9 @@ class Options:
     and tested to change nothing): cull_pairs: shape pairs whose bounding spheres are
     farther apart than contact_margin get no narrow phase; dormant_rows: the hybrid
     solve checks one-sided rows that neither pushed last step nor ask to push after the
-    solve instead of iterating them (solver.solve.hybrid); sleep: islands at rest and
+    solve instead of iterating them (solver.solve.hybrid); leaf_contacts: the hybrid
+    solve eliminates a bone's contacts with the static world with the joints while they
+    stick, and iterates only those that slide (solver.solve.hybrid); sleep: islands at rest and
     untouched for sleep_time (s), every body slower than sleep_speed (m/s) and
     sleep_spin (rad/s), are frozen until touched (solver.advance.sleep).
     engine: "compiled" (the numba step, solver.compiled) or "numpy" (the readable
@@ -88,6 +90,7 @@ class Options:
     max_substeps: int = 64
     cull_pairs: bool = True
     dormant_rows: bool = True
+    leaf_contacts: bool = True
     sleep: bool = True
     sleep_speed: float = 5e-4
     sleep_spin: float = 5e-3

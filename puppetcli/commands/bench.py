@@ -160,8 +160,8 @@ def command(
 
     After the table, where a doll step's time goes, stage by stage (read from the
     processor's cycle counter inside the compiled step).  With --skips: each skip of
-    unneeded work (pair culling, dormant rows, the direct solve) on and off.  With
-    --pins: the grip scene with 0, 1 and 4 pins.
+    unneeded work (pair culling, dormant rows, leaf contacts, the direct solve, sleeping)
+    on and off.  With --pins: the grip scene with 0, 1 and 4 pins.
 
     With --accuracy: error against run time on like-for-like scenes (puppetcli/bench/
     likeforlike.py: Voigt chains and the doll, released or pulled, no contacts) for our two

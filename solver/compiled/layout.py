@@ -146,7 +146,7 @@ IOpt = offsets("IOpt", [
     ("bdf2", 1),  # integrator: bdf2
     ("iterations", 1), ("warm_start", 1), ("has_rheology", 1), ("has_limits", 1),
     ("has_collision", 1), ("max_substeps", 1), ("profiling", 1), ("cull_pairs", 1),
-    ("dormant_rows", 1), ("sleep", 1),
+    ("dormant_rows", 1), ("leaf_contacts", 1), ("sleep", 1),
 ])  # fmt: skip
 """iopt: the integer and boolean options and the model's features."""
 
@@ -218,7 +218,7 @@ SolverIndex = structure("SolverIndex", ("ints",), [
     ("its", "i"), ("pinned", "i"), ("local", "i"), ("fric", "i"),  # rows
     ("path", "i"), ("needed", "i"),  # nodes
     ("free_grip", "i"),  # 6
-    ("leaves", "i"), ("rub", "i"),  # rows
+    ("leaves", "i"), ("first_friction", "i"),  # rows
 ])  # fmt: skip
 
 SolverValues = structure("SolverValues", ("values",), [

@@ -154,7 +154,10 @@ def pack(model: Model) -> FastModel:
     iopt[IOpt.bdf2] = o.integrator == "bdf2"
     iopt[IOpt.has_rheology] = bool(model.joint_rheology.any())
     iopt[IOpt.has_limits], iopt[IOpt.has_collision] = model.has_limits, model.has_collision
-    options = ("iterations", "warm_start", "max_substeps", "cull_pairs", "dormant_rows", "sleep")
+    options = (
+        "iterations", "warm_start", "max_substeps", "cull_pairs", "dormant_rows", "leaf_contacts",
+        "sleep",
+    )  # fmt: skip
     for entry in options:
         iopt[IOpt[entry]] = getattr(o, entry)
     if o.method not in METHODS:

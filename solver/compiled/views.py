@@ -283,7 +283,7 @@ def solver_index_view(flat, k):
         leaf_i(flat, k + 5),  # needed
         leaf_i(flat, k + 6),  # free_grip
         leaf_i(flat, k + 7),  # leaves
-        leaf_i(flat, k + 8),  # rub
+        leaf_i(flat, k + 8),  # first_friction
     )
 
 

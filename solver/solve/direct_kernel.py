@@ -381,11 +381,11 @@ def forest_sequence(tree, nb, movable, free_grip, ngrip, body, leaves, asleep, j
     """Fill the elimination sequence (seq, parent, rows, size of ``tree``) for the joint
     forest and, with ngrip > 0, the grip's node of the rows free_grip[:ngrip], a leaf of
     the gripped body (its own root when the body cannot move); returns its length.
-    leaves = (rw, normal rows, count, rub): leaf contacts (solver.solve.hybrid), a node
-    each of its normal row and its two friction rows rub[c], rub[c] + 1 (none when
-    rub[c] < 0), hung from the contact's movable body.  Sleeping islands (asleep (nb,)
-    bool) are left out: each is a whole component of the forest, with no rows
-    (solver.advance.sleep)."""
+    leaves = (rw, normal rows, count, first_friction): leaf contacts (solver.solve.hybrid),
+    a node each of its normal row c and its two friction rows first_friction[c] and the
+    next (none when first_friction[c] < 0), hung from the contact's movable body.
+    Sleeping islands (asleep (nb,) bool) are left out: each is a whole component of the
+    forest, with no rows (solver.advance.sleep)."""
     order, parent, rheo_start, _, seq, rows, size, _ = tree
     node = nb + len(rheo_start)
     nseq = 0
@@ -395,14 +395,15 @@ def forest_sequence(tree, nb, movable, free_grip, ngrip, body, leaves, asleep, j
         size[node] = ngrip
         for k in range(ngrip):
             rows[node, k] = free_grip[k]
-    rw, leaf_rows, nleaf, rub = leaves
+    rw, leaf_rows, nleaf, first_friction = leaves
     for k in range(nleaf):
         r, leaf = leaf_rows[k], node + 1 + k
         seq[nseq], nseq = leaf, nseq + 1
         parent[leaf] = rw.body_a[r] if rw.body_a[r] >= 0 else rw.body_b[r]
         size[leaf], rows[leaf, 0] = 1, r
-        if rub[r] >= 0:
-            size[leaf], rows[leaf, 1], rows[leaf, 2] = 3, rub[r], rub[r] + 1
+        f = first_friction[r]
+        if f >= 0:
+            size[leaf], rows[leaf, 1], rows[leaf, 2] = 3, f, f + 1
     for i in order:
         if asleep[i] if i < nb else asleep[joint_bone[i - nb]]:
             continue

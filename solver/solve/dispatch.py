@@ -45,7 +45,13 @@ def solve(model: Model, state: State, rows: Rows, resp: tuple, vel_free: np.ndar
         lam0 = lam  # the active set did not settle: finish with PGS from there
     if method == "hybrid":
         lam, sweeps, residual = hybrid_solve(
-            rows, resp, vel_free, lam0, opt.iterations, skip_dormant=opt.dormant_rows
+            rows,
+            resp,
+            vel_free,
+            lam0,
+            opt.iterations,
+            skip_dormant=opt.dormant_rows,
+            leaves=opt.leaf_contacts,
         )
         return lam, apply_forces(rows, resp, vel_free, lam), sweeps, residual, "hybrid"
     if method == "reference":

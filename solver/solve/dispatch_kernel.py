@@ -87,7 +87,7 @@ def direct(bw, tree, h, rw, n, ne, vel_free, lam0, grip, asleep, sv, lam, vel):
         if rw.kind[i] != KIND_GRIP:
             return 2, 0.0
     code, _, _ = hybrid_solve(
-        bw, tree, h, rw, n, ne, vel_free, lam0, 0, grip, False, asleep, sv, lam, vel,
+        bw, tree, h, rw, n, ne, vel_free, lam0, 0, grip, (False, False), asleep, sv, lam, vel,
         DIRECT_ROUNDS,
     )  # fmt: skip
     if code != 0:
@@ -148,7 +148,7 @@ def solve(bw, tree, rw, opt, iopt, warm, n, vel_free, grip, asleep, sv, lam0, la
     if hybrid:
         code, sweeps, residual = hybrid_solve(
             bw, tree, opt[Opt.h], rw, n, ne, vel_free, lam0, iopt[IOpt.iterations], grip,
-            iopt[IOpt.dormant_rows], asleep, sv, lam, vel, ROUNDS,
+            (iopt[IOpt.dormant_rows], iopt[IOpt.leaf_contacts]), asleep, sv, lam, vel, ROUNDS,
         )  # fmt: skip
         return (OK if code != 2 else FALLBACK), sweeps, residual, SOLVER_HYBRID
     sweeps, residual = pgs_into(

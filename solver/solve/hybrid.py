@@ -126,12 +126,14 @@ def hybrid_solve(
     tol: float = 1e-12,
     rounds: int = 20,
     skip_dormant: bool = True,
+    leaves: bool = True,
 ) -> tuple[np.ndarray, int, float]:
     """(λ, sweeps, residual) (module docstring); sweeps and residual are those of the
     last round's PGS on S (0 when nothing is iterated).  ``skip_dormant`` False iterates
-    the dormant rows too (the unskipped path, for measuring the skip)."""
+    the dormant rows too (the unskipped path, for measuring the skip); ``leaves`` False
+    iterates the leaf contacts too (Options.leaf_contacts)."""
     q, c = dense_system(rows, resp, vel_free)
-    joint, grip, leaf = equality_rows(rows), rows.kind == KIND_GRIP, leaf_contacts(rows)
+    joint, grip, leaf = equality_rows(rows), rows.kind == KIND_GRIP, leaf_contacts(rows) & leaves
     own = contact_of(rows)
     rubbing = np.zeros(len(rows), bool)  # normal rows with friction rows
     rubbing[own[rows.fric_of >= 0]] = True
@@ -141,14 +143,14 @@ def hybrid_solve(
     for _ in range(rounds):
         pinned_lam = np.where(at_lo, rows.lo, np.where(at_hi, rows.hi, np.nan))
         stuck = leaf & ~sliding[own] & ~at_lo[own] & ~dormant
-        exact = joint | (grip & ~at_lo & ~at_hi & ~dormant) | stuck
+        exact = joint | (grip & ~at_lo & ~at_hi) | stuck
         it = ~joint & ~grip & ~dormant & (~leaf | sliding[own])
         lam, sweeps, residual = _round(rows, q, c, lam0, exact, it, pinned_lam, iterations, tol)
         r = q @ lam + c
         crossed = dormant & (rows.fric_of < 0) & (r < 0.0)
         woke = crossed[own]
         release = (at_hi & (r > 0.0)) | (at_lo & (r < 0.0))
-        free = (grip & ~at_lo & ~at_hi & ~dormant) | (stuck & (rows.fric_of < 0))
+        free = (grip & ~at_lo & ~at_hi) | (stuck & (rows.fric_of < 0))
         leave_lo, leave_hi = free & (lam < rows.lo) & ~rubbing, free & (lam > rows.hi)
         slip = stuck & (rows.fric_of >= 0) & (np.abs(lam) > rows.mu * lam[own])
         slides = free & (lam < rows.lo) & rubbing  # (held in the tangent, it would pull)

@@ -175,17 +175,18 @@ def _iterated_large(rw, its, nu, seq, nseq, parent, nb, size, tw, movable, lam0,
 
 
 @kernel(error_model="numpy", inline="always")
-def _round(bw, tree, h, rw, lam, vel_p, its, nu, grips, lam0, iters, asleep, sv, vel):
+def _round(bw, tree, h, rw, lam, vel_p, its, nu, nodes, lam0, iters, asleep, sv, vel):
     """One solve with the current sets into lam and vel: (ok, sweeps, residual).
-    bw: the solvers' model arrays (solver.solve.dispatch_kernel.solve); grips = (free grip rows,
+    bw: the solvers' model arrays (solver.solve.dispatch_kernel.solve); nodes = (free grip rows,
     their count, the gripped body, the sticking leaf contacts' normal rows, their count,
     each normal row's first friction row); sv: the solvers' scratch (kernel.step_arrays)."""
     _, parent, _, _, seq, rows, size, tw = tree
     joint_bone, mass, movable, resp_a, resp_b, _, inertia_w = bw
     nb = len(vel_p)
-    free_grip, ngrip, body, leaves, nleaf, rub = grips
+    free_grip, ngrip, body, leaves, nleaf, first_friction = nodes
+    leaf_nodes = (rw, leaves, nleaf, first_friction)
     nseq = forest_sequence(
-        tree, nb, movable, free_grip, ngrip, body, (rw, leaves, nleaf, rub), asleep, joint_bone
+        tree, nb, movable, free_grip, ngrip, body, leaf_nodes, asleep, joint_bone
     )
     init_nodes(seq, nseq, nb, rw, vel_p, h, mass, inertia_w, rows, size, tw.block, tw.rhs)
     if not tree_factor(seq, nseq, parent, nb, rw, rows, size, tw):
@@ -213,29 +214,31 @@ def _round(bw, tree, h, rw, lam, vel_p, its, nu, grips, lam0, iters, asleep, sv,
 
 
 @kernel(error_model="numpy", inline="always")
-def hybrid_solve(bw, tree, h, rw, n, ne, vel_free, lam0, iterations, grip, skip, asleep, sv,
+def hybrid_solve(bw, tree, h, rw, n, ne, vel_free, lam0, iterations, grip, skips, asleep, sv,
                  lam, vel, rounds):  # fmt: skip
     """(code, sweeps, residual) as solver.solve.hybrid.hybrid_solve, λ into lam[:n] and the
     velocities into vel; code 0: the sets settled, 1: not within ``rounds`` (λ clipped to
-    its bounds), 2: the exact system is degenerate.  bw: the solvers' model arrays
-    (solver.solve.dispatch_kernel.solve); h: the step; ``skip``: leave dormant rows out of the
-    iteration; asleep (nb,) bool: sleeping bodies (their islands are not in the forest);
-    sv: the solvers' scratch (kernel.step_arrays: nothing is allocated unless more than
-    NU_CAP rows are iterated).  Without iterated rows (a table of joint and grip rows
-    only) this is the direct solve's active set on the grip (kernel.direct)."""
+    its bounds), 2: the exact system is degenerate. bw: the solvers' model arrays
+    (solver.solve.dispatch_kernel.solve); h: the step; skips = (leave dormant rows out of
+    the iteration, solve leaf contacts in the forest: Options.dormant_rows, leaf_contacts);
+    asleep (nb,) bool: sleeping bodies (their islands are not in the forest); sv: the
+    solvers' scratch (kernel.step_arrays: nothing is allocated unless more than NU_CAP rows
+    are iterated). Without iterated rows (a table of joint and grip rows only) this is the
+    direct solve's active set on the grip (kernel.direct)."""
     grip0, ngrip, body = grip
     resp_a, resp_b = bw.resp_a, bw.resp_b
     at_lo, at_hi, dormant, leaf, sliding = sv.flags
-    its, pinned, _, _, _, _, free_grip, leaves, rub = sv.ints
+    its, pinned, _, _, _, _, free_grip, leaves, first_friction = sv.ints
     vel_p = sv.vel_p
+    skip, leaves_on = skips
     if skip:
         dormant_rows(rw, n, lam0, dormant)
     for i in range(n):
         at_lo[i], at_hi[i], sliding[i], lam[i] = False, False, False, 0.0
         if not skip:
             dormant[i] = False
-    leaf_contacts(rw, ne, n, bw.inv_mass, asleep, leaf, rub)
-    lo, hi, kind = rw.lo, rw.hi, rw.kind
+    leaf_contacts(rw, ne, n, bw.inv_mass, asleep, leaves_on, leaf, first_friction)
+    lo, hi, kind, fric = rw.lo, rw.hi, rw.kind, rw.fric_of
     sweeps, residual = 0, 0.0
     for _ in range(rounds):
         nu, nfree, nleaf, npin = 0, 0, 0, 0
@@ -248,7 +251,7 @@ def hybrid_solve(bw, tree, h, rw, n, ne, vel_free, lam0, iterations, grip, skip,
                 if not held:
                     free_grip[nfree], nfree = i, nfree + 1
             elif leaf[i]:  # a node while it sticks, iterated once it slides
-                c = i if rw.fric_of[i] < 0 else rw.fric_of[i]
+                c = i if fric[i] < 0 else fric[i]
                 if not (at_lo[c] or dormant[i]):
                     if sliding[c]:
                         its[nu], nu = i, nu + 1
@@ -258,14 +261,14 @@ def hybrid_solve(bw, tree, h, rw, n, ne, vel_free, lam0, iterations, grip, skip,
                 its[nu], nu = i, nu + 1
         copy6(vel_free, vel_p)
         apply_listed(rw, pinned, npin, resp_a, resp_b, lam, vel_p)  # (most rounds: none)
+        nodes = (free_grip, nfree, body, leaves, nleaf, first_friction)
         ok, sweeps, residual = _round(
-            bw, tree, h, rw, lam, vel_p, its, nu, (free_grip, nfree, body, leaves, nleaf, rub),
-            lam0, iterations, asleep, sv, vel,
-        )  # fmt: skip
+            bw, tree, h, rw, lam, vel_p, its, nu, nodes, lam0, iterations, asleep, sv, vel
+        )
         if not ok:
             return 2, 0, 0.0
-        if not _update_sets(rw, ne, n, lam, vel, (grip0, ngrip), (leaf, rub, sliding), dormant,
-                            at_lo, at_hi):  # fmt: skip
+        sets = (leaf, first_friction, sliding)
+        if not _update_sets(rw, ne, n, lam, vel, (grip0, ngrip), sets, dormant, at_lo, at_hi):
             return 0, sweeps, residual
     for i in range(n):
         lam[i] = min(max(lam[i], lo[i]), hi[i])
@@ -273,25 +276,25 @@ def hybrid_solve(bw, tree, h, rw, n, ne, vel_free, lam0, iterations, grip, skip,
 
 
 @kernel(error_model="numpy", inline="always")
-def leaf_contacts(rw, ne, n, movable, asleep, leaf, rub):
-    """leaf[ne:n] ← solver.solve.hybrid.leaf_contacts, and the bone on the other side
-    awake and movable (the forest hangs the contact from it); rub[c] ← the first of
-    normal row c's two friction rows (contact_rows makes them in pairs), −1 without.
-    (Inlined: called, it cost 0.75 µs a step on every scene through the direct solve.)"""
+def leaf_contacts(rw, ne, n, movable, asleep, on, leaf, first_friction):
+    """leaf[ne:n] ← solver.solve.hybrid.leaf_contacts, and the bone on the other side awake and
+    movable (the forest hangs the contact from it); first_friction[c] ← the first of normal
+    row c's two friction rows (contact_rows makes them in pairs), −1 without. (Inlined:
+    called, it cost 0.75 µs a step on every scene through the direct solve.)"""
     fric = rw.fric_of
     for i in range(ne, n):
         a, b = rw.body_a[i], rw.body_b[i]
         bone = a if b < 0 else b if a < 0 else -1
         leaf[i] = (
-            rw.kind[i] == KIND_CONTACT and rw.comp[i] > 0.0 and bone >= 0
+            on and rw.kind[i] == KIND_CONTACT and rw.comp[i] > 0.0 and bone >= 0
             and movable[bone] > 0.0 and not asleep[bone]
         )  # fmt: skip
-        rub[i] = -1
+        first_friction[i] = -1
     for i in range(ne, n):
         if fric[i] >= 0:
             leaf[fric[i]] = leaf[fric[i]] and rw.comp[i] > 0.0
-            if rub[fric[i]] < 0:
-                rub[fric[i]] = i
+            if first_friction[fric[i]] < 0:
+                first_friction[fric[i]] = i
     for i in range(ne, n):
         if fric[i] >= 0:
             leaf[i] = leaf[fric[i]]
@@ -301,13 +304,13 @@ def leaf_contacts(rw, ne, n, movable, asleep, leaf, rub):
 def _update_sets(rw, ne, n, lam, vel, grip, leaves, dormant, at_lo, at_hi):
     """Wake crossed dormant rows (and their friction), pin and free grip rows and leaf
     contacts (by their normal rows), slide a sticking leaf contact whose friction leaves
-    its pyramid; True when anything changed.  grip = (first row, count); leaves = (leaf,
-    rub, sliding) (``hybrid_solve``).
+    its pyramid or that would pull; True when anything changed.  grip = (first row,
+    count); leaves = (leaf, first_friction, sliding) (``hybrid_solve``).
 
     The row arrays are taken out of the table once: an array read from a tuple inside an
     and/or costs two uncancelled reference counts each time (~300 ns, numba 0.68)."""
     lo, hi, comp, bias, fric, mu = rw.lo, rw.hi, rw.comp, rw.bias, rw.fric_of, rw.mu
-    (grip0, ngrip), (leaf, rub, sliding) = grip, leaves
+    (grip0, ngrip), (leaf, first_friction, sliding) = grip, leaves
     changed = False
     for i in range(ne, n):
         r = row_velocity(rw, i, vel) + comp[i] * lam[i] + bias[i]
@@ -317,12 +320,12 @@ def _update_sets(rw, ne, n, lam, vel, grip, leaves, dormant, at_lo, at_hi):
         elif grip0 <= i < grip0 + ngrip or (leaf[i] and fric[i] < 0 and not sliding[i]):
             if (at_hi[i] and r > 0.0) or (at_lo[i] and r < 0.0):
                 at_lo[i], at_hi[i], changed = False, False, True
-            elif not held and (lam[i] < lo[i] or lam[i] > hi[i]) and rub[i] < 0:
+            elif not held and (lam[i] < lo[i] or lam[i] > hi[i]) and first_friction[i] < 0:
                 at_lo[i], at_hi[i], changed = lam[i] < lo[i], lam[i] > hi[i], True
             elif not held and lam[i] < lo[i]:  # held in the tangent, it would pull
                 sliding[i], changed = True, True
-            elif not (held or dormant[i]) and rub[i] >= 0:
-                f = rub[i]
+            elif not (held or dormant[i]) and first_friction[i] >= 0:
+                f = first_friction[i]
                 if abs(lam[f]) > mu[f] * lam[i] or abs(lam[f + 1]) > mu[f + 1] * lam[i]:
                     sliding[i], changed = True, True
     for i in range(ne, n):
