@@ -9,7 +9,8 @@ Rows fall into three sets:
   the joint forest, hung from its bone);
 * P, pinned: grip rows at a force limit, their force fixed at the bound, and
   frictionless leaf contacts that would pull (λ fixed at 0);
-* U, iterated: the other contacts (between bones), the leaf contacts that slide, their
+* U, iterated: the other contacts (between bones), the leaf contacts that slide (and,
+  with friction, those that did not push last step or slid then: ``iterated_first``), their
   friction and joint limits, except the *dormant* ones: one-sided rows that did not push
   last step (warm λ = 0) and ask for no push now (bias > 0: a speculative gap, a limit not
   yet reached), with their friction rows.
@@ -56,6 +57,11 @@ def equality_rows(rows: Rows) -> np.ndarray:
     return (rows.kind == KIND_JOINT) | (rows.kind == KIND_RHEOLOGY)
 
 
+SLID = 0.99
+"""A warm friction force at least this fraction of its pyramid's bound (μ times its normal's
+warm force): the contact slid last step (``iterated_first``)."""
+
+
 def contact_of(rows: Rows) -> np.ndarray:
     """(n,) int: each friction row's normal row, every other row itself."""
     return np.where(rows.fric_of >= 0, rows.fric_of, np.arange(len(rows)))
@@ -70,6 +76,19 @@ def leaf_contacts(rows: Rows) -> np.ndarray:
     leaf = (rows.kind == KIND_CONTACT) & static_side
     np.logical_and.at(leaf, own, rows.comp > 0.0)
     return leaf[own]
+
+
+def iterated_first(rows: Rows, lam0: np.ndarray) -> np.ndarray:
+    """(n,) bool: the normal rows with friction rows that start the step iterated rather
+    than in the forest: those that did not push last step (touching down: warm λ_n = 0)
+    and those whose warm friction sat at its bound (it slid: |λ_t| ≥ SLID·μ·λ_n).  Either
+    would most likely slide again, and finding that out in the forest costs a round."""
+    own = contact_of(rows)
+    friction = rows.fric_of >= 0
+    at_bound = friction & (np.abs(lam0) >= SLID * rows.mu * lam0[own])
+    first = np.zeros(len(rows), bool)
+    first[own[at_bound | (friction & ~(lam0[own] > 0.0))]] = True
+    return first
 
 
 def dormant_rows(rows: Rows, lam0: np.ndarray) -> np.ndarray:
@@ -139,7 +158,7 @@ def hybrid_solve(
     rubbing[own[rows.fric_of >= 0]] = True
     dormant = dormant_rows(rows, lam0) & ~grip & skip_dormant
     at_lo, at_hi = np.zeros(len(rows), bool), np.zeros(len(rows), bool)  # (a leaf: its normal)
-    sliding = np.zeros(len(rows), bool)  # leaf contacts iterated for the rest of the step
+    sliding = iterated_first(rows, lam0)  # leaf contacts iterated for the rest of the step
     for _ in range(rounds):
         pinned_lam = np.where(at_lo, rows.lo, np.where(at_hi, rows.hi, np.nan))
         stuck = leaf & ~sliding[own] & ~at_lo[own] & ~dormant

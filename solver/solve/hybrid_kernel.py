@@ -8,16 +8,17 @@ in the direct solve); a leaf contact (``leaf_contacts``: a bone against the stat
 is a node of its normal row and its two friction rows (the normal row alone without
 friction), hung from its bone while it pushes and sticks (the static side adds no edge, so
 the forest stays a forest); once its friction leaves the pyramid, or it would pull while
-held in the tangent plane, it slides: iterated with the U rows for the rest of the step;
-a frictionless one that would pull is pinned at λ = 0. Every other row is iterated (U) or
-dormant (solver.hybrid.dormant_rows). With the forest factored once per round
-(tree_factor), each U row r costs one substitution: the body right-hand side J_rᵀ gives
-every body's velocity change per unit λ_r with the joints and grip holding, so S[:, r] =
-J_U y⁽ʳ⁾ + C_r e_r; it runs forward only on the root paths of r's bodies and backward only
-on those of the U rows' bodies. The base substitution (U forces zero) gives s = J_U (v_free
-+ y⁽⁰⁾) + β_U. After PGS on S (solver.solve.pgs.dense_pgs), one more substitution with the
-U forces folded into v_free gives λ of the exact rows and the velocities. Without U rows
-one substitution does it all.
+held in the tangent plane, it slides: iterated with the U rows for the rest of the step
+(one with friction that touched down or slid the step before starts there:
+solver.solve.hybrid.iterated_first); a frictionless one that would pull is pinned at λ = 0.
+Every other row is iterated (U) or dormant (solver.hybrid.dormant_rows). With the forest
+factored once per round (tree_factor), each U row r costs one substitution: the body
+right-hand side J_rᵀ gives every body's velocity change per unit λ_r with the joints and
+grip holding, so S[:, r] = J_U y⁽ʳ⁾ + C_r e_r; it runs forward only on the root paths of
+r's bodies and backward only on those of the U rows' bodies. The base substitution (U
+forces zero) gives s = J_U (v_free + y⁽⁰⁾) + β_U. After PGS on S
+(solver.solve.pgs.dense_pgs), one more substitution with the U forces folded into v_free
+gives λ of the exact rows and the velocities. Without U rows one substitution does it all.
 """
 
 from __future__ import annotations
@@ -45,6 +46,7 @@ from solver.solve.pgs import dense_pgs_into
 from solver.solve.response_kernel import apply_listed, copy6
 
 ROUNDS = inspect.signature(hybrid.hybrid_solve).parameters["rounds"].default
+SLID = hybrid.SLID
 NU_CAP = 64  # iterated rows whose Schur complement fits the step's scratch (kernel.step_arrays)
 
 
@@ -239,6 +241,10 @@ def hybrid_solve(bw, tree, h, rw, n, ne, vel_free, lam0, iterations, grip, skips
             dormant[i] = False
     leaf_contacts(rw, ne, n, bw.inv_mass, asleep, leaves_on, leaf, first_friction)
     lo, hi, kind, fric = rw.lo, rw.hi, rw.kind, rw.fric_of
+    for i in range(ne, n):  # solver.solve.hybrid.iterated_first
+        c = fric[i]
+        if c >= 0 and not (lam0[c] > 0.0 and abs(lam0[i]) < SLID * rw.mu[i] * lam0[c]):
+            sliding[c] = True
     sweeps, residual = 0, 0.0
     for _ in range(rounds):
         nu, nfree, nleaf, npin = 0, 0, 0, 0

@@ -10,7 +10,7 @@ import pytest
 from solver.engine import Engine
 from solver.model import build_model
 from solver.spec import BoneSpec, GroundSpec, RigSpec, ShapeSpec, SolverSpec
-from solver.state import initial_state
+from solver.state import StepInput, initial_state
 
 G = 9.81
 
@@ -128,6 +128,31 @@ def test_box_on_a_slope_slides_above_the_friction_angle_at_the_coulomb_rate(engi
     theta, slide, _ = slope_run(0.6, mu, t, engine)
     a = G * (np.sin(theta) - mu * np.cos(theta))
     assert np.abs(slide - sliding(a, len(slide))).max() < 6e-8  # m, of 0.42 m: 1.2e-8, both
+
+
+@pytest.mark.parametrize("engine", ["numpy", "compiled"])
+def test_a_resting_box_pushed_past_static_friction_slides_at_the_coulomb_rate(engine):
+    # The box rests on flat ground (its contacts stick, solved exactly with nothing
+    # iterated), then a horizontal push of 2μmg starts: on that step the sticking
+    # contacts' friction would have to leave the pyramid, so they slide (iterated from
+    # then on), and the box accelerates at a = (F − μmg)/m = μg along the recursion.
+    mu, rest, pushed = 0.5, 50, 150
+    spec = free_body(ShapeSpec("box", half_extents=(0.1, 0.05, 0.1)), [0, 0, 0], [0, 0.1, 0],
+                     [0, -G, 0], mu, SLOPE_H)  # fmt: skip
+    model = build_model(spec).with_options(engine=engine)
+    stepper = Engine(model).stepper(initial_state(model))
+    for _ in range(rest):
+        stepper.advance()
+    assert stepper.report.iterations == 0  # sticking: nothing iterated
+    start = stepper.view().body_pos[0, 0]
+    push = StepInput(body_force=np.array([[2.0 * mu * 2.0 * G, 0.0, 0.0]]))  # m = 2 kg
+    trail = []
+    for _ in range(pushed):
+        stepper.advance(push)
+        trail.append(stepper.view().body_pos[0, 0] - start)
+    a = mu * G
+    exact = sliding(a, pushed) + a * SLOPE_H**2  # from the position before the push
+    assert np.abs(np.array(trail) - exact).max() < 2e-12  # m, of 0.22 m: measured 4.1e-13, both
 
 
 @pytest.mark.parametrize("engine", ["numpy", "compiled"])

@@ -299,7 +299,8 @@ def test_more_iterated_rows_than_the_scratch_holds_matches(monkeypatch):
     model, state = lying_chain()
     reports = lockstep(model, state, [None] * 40)
     assert {r.solver for r in reports} == {"hybrid"}
-    assert min(sizes) > NU_CAP and len(sizes) == 40
+    # the first step solves twice (its slab contacts, then the balls' woken ones with them)
+    assert min(sizes[1:]) > NU_CAP and len(sizes) == 41
 
 
 def test_chain_tumbling_onto_a_frictionless_ground_matches(monkeypatch):

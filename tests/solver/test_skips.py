@@ -70,14 +70,15 @@ def test_dormant_rows_are_really_left_out_and_checked():
 @pytest.mark.parametrize("engine", ["compiled", "numpy"])
 def test_leaf_contacts_agree_with_the_iteration_and_save_its_sweeps(engine):
     # A chain of balls resting on the ground: with the skip its contacts stick in the
-    # forest, solved exactly, and nothing is iterated; without it PGS on their Schur
+    # forest, solved exactly, and nothing is iterated after the first step (whose
+    # contacts, not pushing before it, start iterated); without it PGS on their Schur
     # complement approaches the same rest as its sweeps grow, slowly: the redundant
     # resting contacts leave it crawling (solver residual ~5e-9 after 15 to 3,000 sweeps).
     spec = chain(8, 0.001, root_mode="free", ground=0.98, collide=True, shape="sphere")
     model = build_model(spec).with_options(sleep=False)
     state, inputs = initial_state(model), [None] * 100
     exact, on = run(engine, model, state, inputs)
-    assert min(r.contacts for r in on) == 8 and sum(r.iterations for r in on) == 0
+    assert min(r.contacts for r in on) == 8 and sum(r.iterations for r in on[1:]) == 0
     gaps = []
     for sweeps in (15, 300):
         iterated, reports = run(engine, model.with_options(leaf_contacts=False, iterations=sweeps),
