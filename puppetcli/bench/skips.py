@@ -2,9 +2,9 @@
 
 For each skip the grip scene of ``puppetcli.bench.solvers`` (the doll's forearm lifted along a
 minimum-jerk path), or the resting chain below, runs with the skip on and off, interleaved,
-best of ``repeats``; the
-row gives both rates, their ratio, and how far apart the two runs end up: the largest
-difference over the run of any body's position (m) and orientation (rad).  A skip must
+best of ``repeats``; the row gives both rates, their ratio, and how far apart the two runs
+end up: the largest difference over the run of any body's position (m) and orientation
+(rad).  A skip must
 change nothing beyond the solver's tolerance; the tests check that.
 
 Skips (``solver.model.Options``):
@@ -58,11 +58,12 @@ class SkipRow:
     rotation_diff: float
 
 
+CHAIN_SCENE = "chain-on-ground"  # the one scene that is not the doll's
 SKIPS = {  # name: (scene, options with the skip on, options with it off)
     "cull_pairs": ("doll", {"cull_pairs": True}, {"cull_pairs": False}),
     "dormant_rows": ("doll", {"dormant_rows": True}, {"dormant_rows": False}),
     "leaf_contacts": (
-        "chain-on-ground",
+        CHAIN_SCENE,
         {"leaf_contacts": True, "sleep": False},
         {"leaf_contacts": False, "sleep": False},
     ),
@@ -73,9 +74,9 @@ SETTLE = 3.0  # s: the sleep skip's untimed start (the legs are asleep after ~2 
 CHAIN_LINKS, CHAIN_RADIUS = 20, 0.015  # chain-on-ground: stress_scenes.chain_rig's links
 
 
-def skip_scenes() -> dict[str, Model]:
-    """The doll's scenes (puppetcli.bench.solvers.doll_scenes) and ``chain-on-ground``."""
-    return {**doll_scenes(), "chain-on-ground": _chain_on_ground()}
+def skip_scene(name: str) -> Model:
+    """A skip's scene: CHAIN_SCENE or one of the doll's (puppetcli.bench.solvers.doll_scenes)."""
+    return _chain_on_ground() if name == CHAIN_SCENE else doll_scenes()[name]
 
 
 def _chain_on_ground() -> Model:
@@ -108,10 +109,10 @@ def differences(a: list[State], b: list[State]) -> tuple[float, float]:
 def measure_skip(name: str, h: float, seconds: float, repeats: int) -> SkipRow:
     """One skip, on and off, interleaved ``repeats`` times (module docstring)."""
     scene, on, off = SKIPS[name]
-    base = skip_scenes()[scene].with_options(h=h)
+    base = skip_scene(scene).with_options(h=h)
     models = (base.with_options(**on), base.with_options(**off))
     n = max(1, round(seconds / h))
-    inputs = grip_inputs(base, seconds, n) if scene in doll_scenes() else [None] * n
+    inputs = [None] * n if scene == CHAIN_SCENE else grip_inputs(base, seconds, n)
     starts = _starts(models[0], h) if name == "sleep" else (initial_state(base),) * 2
     best, states = [math.inf, math.inf], [None, None]
     for m, start in zip(models, starts, strict=True):  # untimed: compile, warm caches

@@ -51,15 +51,14 @@ from solver.solve.direct import solve_spd
 from solver.solve.pgs import dense_pgs
 from solver.solve.response import dense_system
 
+SLID = 0.99
+"""A warm friction force at least this fraction of its pyramid's bound (μ times its normal's
+warm force): the contact slid last step (``iterated_first``)."""
+
 
 def equality_rows(rows: Rows) -> np.ndarray:
     """(n,) bool: the joints' rows (anchors and rheology), always solved exactly."""
     return (rows.kind == KIND_JOINT) | (rows.kind == KIND_RHEOLOGY)
-
-
-SLID = 0.99
-"""A warm friction force at least this fraction of its pyramid's bound (μ times its normal's
-warm force): the contact slid last step (``iterated_first``)."""
 
 
 def contact_of(rows: Rows) -> np.ndarray:
@@ -81,13 +80,13 @@ def leaf_contacts(rows: Rows) -> np.ndarray:
 def iterated_first(rows: Rows, lam0: np.ndarray) -> np.ndarray:
     """(n,) bool: the normal rows with friction rows that start the step iterated rather
     than in the forest: those that did not push last step (touching down: warm λ_n = 0)
-    and those whose warm friction sat at its bound (it slid: |λ_t| ≥ SLID·μ·λ_n).  Either
-    would most likely slide again, and finding that out in the forest costs a round."""
+    and those whose warm friction sat at its bound (it slid: |λ_t| ≥ SLID·μ·λ_n, which
+    holds for λ_n = 0 too).  Either would most likely slide again, and finding that out in
+    the forest costs a round."""
     own = contact_of(rows)
-    friction = rows.fric_of >= 0
-    at_bound = friction & (np.abs(lam0) >= SLID * rows.mu * lam0[own])
+    at_bound = (rows.fric_of >= 0) & (np.abs(lam0) >= SLID * rows.mu * lam0[own])
     first = np.zeros(len(rows), bool)
-    first[own[at_bound | (friction & ~(lam0[own] > 0.0))]] = True
+    first[own[at_bound]] = True
     return first
 
 
@@ -95,7 +94,7 @@ def dormant_rows(rows: Rows, lam0: np.ndarray) -> np.ndarray:
     """(n,) bool: one-sided rows with λ0 = 0 and bias > 0, and the friction of those."""
     one_sided = (rows.lo == 0.0) & np.isinf(rows.hi) & (rows.fric_of < 0)
     normal = one_sided & (lam0 == 0.0) & (rows.bias > 0.0)
-    return normal | ((rows.fric_of >= 0) & normal[np.maximum(rows.fric_of, 0)])
+    return normal[contact_of(rows)]
 
 
 def schur_system(q: np.ndarray, c: np.ndarray, exact: np.ndarray, it: np.ndarray) -> tuple:

@@ -243,7 +243,7 @@ def hybrid_solve(bw, tree, h, rw, n, ne, vel_free, lam0, iterations, grip, skips
     lo, hi, kind, fric = rw.lo, rw.hi, rw.kind, rw.fric_of
     for i in range(ne, n):  # solver.solve.hybrid.iterated_first
         c = fric[i]
-        if c >= 0 and not (lam0[c] > 0.0 and abs(lam0[i]) < SLID * rw.mu[i] * lam0[c]):
+        if c >= 0 and abs(lam0[i]) >= SLID * rw.mu[i] * lam0[c]:
             sliding[c] = True
     sweeps, residual = 0, 0.0
     for _ in range(rounds):

@@ -136,13 +136,10 @@ def test_a_resting_box_pushed_past_static_friction_slides_at_the_coulomb_rate(en
     # iterated), then a horizontal push of 2μmg starts: on that step the sticking
     # contacts' friction would have to leave the pyramid, so they slide (iterated from
     # then on), and the box accelerates at a = (F − μmg)/m = μg along the recursion.
-    mu, rest, pushed = 0.5, 50, 150
+    mu, pushed = 0.5, 150
     spec = free_body(ShapeSpec("box", half_extents=(0.1, 0.05, 0.1)), [0, 0, 0], [0, 0.1, 0],
                      [0, -G, 0], mu, SLOPE_H)  # fmt: skip
-    model = build_model(spec).with_options(engine=engine)
-    stepper = Engine(model).stepper(initial_state(model))
-    for _ in range(rest):
-        stepper.advance()
+    stepper, _ = run(spec, 0.1, engine)  # at rest
     assert stepper.report.iterations == 0  # sticking: nothing iterated
     start = stepper.view().body_pos[0, 0]
     push = StepInput(body_force=np.array([[2.0 * mu * 2.0 * G, 0.0, 0.0]]))  # m = 2 kg
