@@ -26,6 +26,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from puppetcli.errors import Interrupted, RunStopped, ScriptError
+from puppetcli.run.interrupt import StepBoundary
 from puppetcli.run.keyframes import KeyframeSet
 from puppetcli.run.pins import PinBoard
 from puppetcli.run.snapshot import capture, push_input
@@ -138,6 +139,7 @@ class Runner:
         self.displayed = ((0.0,) * 3, (0.0,) * 3)  # the last step's wrench on the hand
         self._handlers: dict | None = None
         self.upgrade: Callable[[], bool] | None = None  # True: move to the compiled step
+        self.boundary = StepBoundary()  # Ctrl-C is taken before a step, never within one
 
     @property
     def state(self) -> State:
@@ -148,17 +150,20 @@ class Runner:
         """Run every action (the script's unless given), then wait out the script's duration."""
         start = time.perf_counter()
         error = None
-        try:
-            for action in self.script.actions if actions is None else actions:
-                self.act(action)
-            if self.script.duration is not None:
-                self.advance(self.script.duration - self.sim.time)
-        except (SimulationError, RunStopped) as exc:
-            error = exc
-        except KeyboardInterrupt:  # Ctrl-C: the run ends here; its keys and trace are kept
-            error = Interrupted(self.sim.steps, self.sim.time)
-        if self.trace is not None:
-            self.trace.flush()  # the trace's last steps are part of the run's time
+        with self.boundary:
+            try:
+                for action in self.script.actions if actions is None else actions:
+                    self.act(action)
+                if self.script.duration is not None:
+                    self.advance(self.script.duration - self.sim.time)
+            except (SimulationError, RunStopped) as exc:
+                error = exc
+            except KeyboardInterrupt:  # Ctrl-C: the run ends here; its keys and trace are kept
+                error = Interrupted(self.sim.steps, self.sim.time)
+            if self.trace is not None:
+                self.trace.flush()  # the trace's last steps are part of the run's time
+            if self.boundary.requested and error is None:  # Ctrl-C as the run ended
+                error = Interrupted(self.sim.steps, self.sim.time)
         return RunResult(
             self.keys, self.sim.state, self.sim.steps, time.perf_counter() - start,
             self.expectations, self.peak, self.peak_displayed, error,
@@ -168,6 +173,7 @@ class Runner:
         """Carry out one action (steps the simulation for a timed one)."""
         if self._handlers is None:
             self._handlers = self._handler_table()
+        self.boundary.check()
         if self.upgrade is not None and self.upgrade():
             self._upgrade()
         began = self.sim.time
@@ -310,8 +316,10 @@ class Runner:
         for k in range(len(starts)):
             if self._batched(push):  # from here on, every input is known
                 for first in range(k, len(starts), BATCH):  # progress between batches
+                    self.boundary.check()
                     self._run_batch(poses, first, min(first + BATCH, len(starts)))
                 return
+            self.boundary.check()
             inp = self._input(push, poses, k)
             sim.advance(inp)
             self._after_step(inp)
