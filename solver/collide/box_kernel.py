@@ -1,5 +1,5 @@
 """Compiled narrow phase for boxes against a plane and against spheres/capsules
-(solver.collide.box's twin; box-box pairs are not compiled).
+(solver.collide.box's twin; box–box pairs: solver.collide.boxbox_kernel).
 """
 
 from __future__ import annotations

@@ -5,6 +5,7 @@ coordinates and their contacts, pair group by pair group.
 from __future__ import annotations
 
 from solver.collide.box_kernel import plane_box, segment_box
+from solver.collide.boxbox_kernel import box_box
 from solver.collide.segment_kernel import plane_segment, segment_segment
 from solver.jit import kernel
 from solver.kin_kernel import (
@@ -23,7 +24,9 @@ from solver.kin_kernel import (
 PLANE, BOX = 0, 3
 
 
-GROUP_PLANE_SEGMENT, GROUP_PLANE_BOX, GROUP_SEGMENT_SEGMENT, GROUP_SEGMENT_BOX = range(4)
+GROUP_PLANE_SEGMENT, GROUP_PLANE_BOX, GROUP_SEGMENT_SEGMENT, GROUP_SEGMENT_BOX, GROUP_BOX_BOX = (
+    range(5)
+)
 
 
 Y_AXIS = (0.0, 1.0, 0.0)
@@ -46,8 +49,8 @@ def world_shapes(g, body_pos, body_quat, centre, rot):
 
 @kernel(error_model="numpy", _nrt=False)
 def collide_scene(g, centre, rot, margin, cb, cull, awake):
-    """Contacts of the scene's candidate pairs into cb; returns the count, or −1 when a
-    box–box pair is within reach (not compiled: the caller falls back to numpy).  With
+    """Contacts of the scene's candidate pairs into cb; returns the count, or −1 for a
+    pair of a group it does not know (the caller falls back to numpy).  With
     ``cull``, pairs whose bounding spheres are farther apart than the margin are skipped
     before the narrow phase (which would find nothing there either); pairs with no
     awake movable body (awake (nb,) bool: solver.advance.sleep) are skipped altogether."""
@@ -82,6 +85,8 @@ def collide_scene(g, centre, rot, margin, cb, cull, awake):
         elif grp == GROUP_SEGMENT_BOX:
             seg_f = (cf, af, half[f, 1], radius[f])
             n = segment_box(cs, rot, s, vec(half, s), *seg_f, margin, ctx, cb, n)
+        elif grp == GROUP_BOX_BOX:
+            n = box_box(centre, rot, half, f, s, margin, ctx, cb, n)
         else:
             return -1
     return n

@@ -11,7 +11,7 @@
 
 Packed arguments (see ``solver.compiled.pack``): m model arrays, g geometry, tree the
 elimination forest, ws/pws workspaces, opt/iopt options, st state arrays, inp input.
-Status FALLBACK hands the step back to the numpy implementation (box–box contact, a
+Status FALLBACK hands the step back to the numpy implementation (a contact with a sleeping body, a
 monitor failure that must raise, a degenerate direct system).  ``_step`` returns SUBSTEP
 (rep_i[ReportInt.rows] equal substeps: solver.advance.substep) or RESTART (a BDF2 step
 without history: solver.advance.bdf2_kernel.RESTART's parts) before anything is computed;

@@ -49,8 +49,7 @@ from solver.rows.joints_kernel import limit_thresholds
 METHODS = {"auto": 0, "pgs": 1, "direct": 2, "hybrid": 3}
 INTEGRATORS = ("euler", "bdf2")
 FEATURES = (2, 8, 3, 3, 16)  # most contacts per pair of each group
-BOX_BOX = 4
-_GROUP = {(0, 1): 0, (0, 2): 1, (1, 1): 2, (1, 2): 3, (2, 2): BOX_BOX}
+_GROUP = {(0, 1): 0, (0, 2): 1, (1, 1): 2, (1, 2): 3, (2, 2): 4}  # scene_kernel's GROUP_*
 _CLASS = np.array([0, 1, 1, 2])
 
 
@@ -208,12 +207,7 @@ def _geometry(model: Model) -> tuple[Geometry, int, str | None]:
     group = np.array(
         [_GROUP.get((int(x), int(y)), -1) for x, y in zip(cls[f], cls[s], strict=True)], np.int64
     )
-    movable = np.append(model.body_inv_mass > 0.0, False)  # index −1: static
-    reason = None
-    if np.any(group < 0):
-        reason = "a shape pair of an unknown kind"
-    elif np.any((group == BOX_BOX) & (movable[body[a]] | movable[body[b]])):
-        reason = "box–box contact is not compiled"
+    reason = "a shape pair of an unknown kind" if np.any(group < 0) else None
     bound = np.where(
         kind == 3, np.linalg.norm(geo.shape_half, axis=1), geo.shape_radius + geo.shape_half[:, 1]
     )

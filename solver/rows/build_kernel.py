@@ -21,7 +21,7 @@ from solver.rows.table_kernel import ZERO
 def build_rows(joints, rheo, limits, g, opt, iopt, st, rot, vel_free, inp, ws, asleep, awake,
                limit_scratch):  # fmt: skip
     """Fill the row table; returns (rows, scene contacts, first grip row, grip rows), or
-    rows = −1 when a box–box pair is within reach.  The shapes' world frames (ws.shape_centre,
+    rows = −1 for a shape pair it does not know.  The shapes' world frames (ws.shape_centre,
     ws.shape_rot) are already computed; asleep/awake (nb,) bool: sleeping bodies and the awake
     movable ones (solver.advance.sleep); limit_scratch: ``limit_rows``' (gaps, turned)."""
     pos, quat = st.x, st.q

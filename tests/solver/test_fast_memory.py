@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 from numba.core.runtime import _nrt_python, rtsys
 from rigbuild import chain
-from test_fast import box_chain, doll_inputs, lying_chain
+from test_fast import box_stack, doll_inputs, lying_chain
 
 from puppetcli.rig.load import load_rig
 from solver.compiled.pack import pack
@@ -51,8 +51,8 @@ def _rope():
 
 
 def _boxes():
-    model = build_model(box_chain())
-    return model, initial_state(model), [None] * 20
+    model = build_model(box_stack(0.4)).with_options(h=0.005)  # 4 of its steps handed back
+    return model, initial_state(model), [None] * 200
 
 
 def _lying_chain():
