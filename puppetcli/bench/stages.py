@@ -17,17 +17,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from solver import quat
-from solver.advance.integrate import free_velocity
 from solver.compiled.clock import STAGES, counter_read_seconds, seconds_per_cycle
 from solver.compiled.layout import IOpt
 from solver.engine import Engine
 from solver.model import Model
 from solver.observe import bone_points
-from solver.rows.build import build_rows
 from solver.rows.grip import Pointer, make_coupling
-from solver.rows.table_kernel import row_arrays
-from solver.solve.direct_kernel import dense_solve, node_rows, tree_solve
-from solver.solve.response import regularize, row_response, world_inverse_inertia
 from solver.state import State, StepInput, initial_state
 
 PUSH_BONE, PUSH_FORCE, PUSH_POINT, PUSH_TIME = "forearm_l", (0.0, 60.0, 0.0), (0.25, 0, 0), 0.3
@@ -120,55 +115,6 @@ def first_call_seconds(model: Model) -> float:
     start = time.perf_counter()
     Engine(model).step(initial_state(model))
     return time.perf_counter() - start
-
-
-def direct_solvers(model: Model, calls: int = 2000) -> dict[str, float]:
-    """Microseconds per solve of one step's two-sided rows (rest pose, no contacts or
-    limits expected): the tree elimination against the dense Cholesky, both compiled."""
-    state = initial_state(model)
-    rot = quat.matrix(state.body_quat)
-    inv_i = world_inverse_inertia(model.body_inv_inertia, rot)
-    vel_free = free_velocity(model, state, StepInput(), inv_i)
-    rows, _, _ = build_rows(model, state, rot, vel_free)
-    resp = row_response(rows, model.body_inv_mass, inv_i, model.options.h)
-    rows = regularize(rows, resp, model.options.regularization)
-    if not rows.bilateral:
-        raise ValueError("the direct solvers need a table of two-sided rows only")
-    rw = row_arrays(rows)
-    order, parent, rheo_start, _, _, node_rows_, size, tw = Engine(model).packed.tree
-    for i in order:
-        size[i] = node_rows(i, model.nbody, rheo_start, node_rows_[i])
-    inertia_w = rot @ model.body_inertia @ np.swapaxes(rot, 1, 2)
-    lam = np.zeros(len(rows))
-
-    def tree():
-        tree_solve(
-            order,
-            len(order),
-            parent,
-            model.nbody,
-            rw,
-            vel_free,
-            model.options.h,
-            model.body_mass,
-            inertia_w,
-            node_rows_,
-            size,
-            tw,
-            lam,
-        )
-
-    def dense():
-        dense_solve(rw, resp[0], resp[1], len(rows), vel_free, lam)
-
-    out = {"rows": float(len(rows))}
-    for name, fn in (("tree", tree), ("dense", dense)):
-        fn()
-        start = time.perf_counter()
-        for _ in range(calls):
-            fn()
-        out[name] = (time.perf_counter() - start) / calls * 1e6
-    return out
 
 
 def stage_profile(

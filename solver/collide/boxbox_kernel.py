@@ -9,9 +9,9 @@ from __future__ import annotations
 
 import math
 
-from solver.collide.segment_kernel import EPS, emit, safe_div
+from solver.collide.segment_kernel import emit, safe_div, segment_params
 from solver.jit import kernel
-from solver.kin_kernel import add, clip, column, cross, dot, neg, norm, scale, sub, vec
+from solver.kin_kernel import add, column, cross, dot, neg, norm, scale, sub, vec
 
 AXIS_BIAS = 1e-3  # solver.collide.boxbox.AXIS_BIAS
 CLIP_TOL = 1e-9  # solver.collide.boxbox._CLIP_TOL
@@ -41,25 +41,26 @@ def _reach(rot, s, half, axis):
 
 
 @kernel(error_model="numpy")
-def _separation(centre, rot, half, a, b, k):
-    """(sep, t, unit axis) of candidate axis k (sep = −inf for a degenerate cross axis)."""
+def _separation(offset, rot, half, a, b, k):
+    """(sep, t, unit axis) of candidate axis k, offset = c_b − c_a (sep = −inf for a
+    degenerate cross axis)."""
     raw = _axis(rot, a, b, k)
     length = norm(raw)
     unit = scale(1.0 / max(length, 1e-300), raw)
-    t = dot(sub(vec(centre, b), vec(centre, a)), unit)
+    t = dot(offset, unit)
     if length <= 1e-6:
         return -math.inf, t, unit
     return abs(t) - _reach(rot, a, half, unit) - _reach(rot, b, half, unit), t, unit
 
 
 @kernel(error_model="numpy")
-def _best_of(centre, rot, half, a, b, first, last):
+def _best_of(offset, rot, half, a, b, first, last):
     """The first axis of largest separation among candidates first … last − 1:
     (index, sep, t, unit axis)."""
     best = first
-    sep, t, unit = _separation(centre, rot, half, a, b, first)
+    sep, t, unit = _separation(offset, rot, half, a, b, first)
     for k in range(first + 1, last):
-        s_k, t_k, u_k = _separation(centre, rot, half, a, b, k)
+        s_k, t_k, u_k = _separation(offset, rot, half, a, b, k)
         if s_k > sep:
             best, sep, t, unit = k, s_k, t_k, u_k
     return best, sep, t, unit
@@ -71,11 +72,12 @@ def separating_axis(centre, rot, half, a, b):
     then b's if better by the bias, then an edge axis if better than that by the bias."""
     bias = AXIS_BIAS * (half[a, 0] + half[a, 1] + half[a, 2] + half[b, 0] + half[b, 1]
                         + half[b, 2]) / 3.0  # fmt: skip
-    best, sep, t, unit = _best_of(centre, rot, half, a, b, 0, 3)
-    kb, sb, tb, ub = _best_of(centre, rot, half, a, b, 3, 6)
+    offset = sub(vec(centre, b), vec(centre, a))
+    best, sep, t, unit = _best_of(offset, rot, half, a, b, 0, 3)
+    kb, sb, tb, ub = _best_of(offset, rot, half, a, b, 3, 6)
     if sb > sep + bias:
         best, sep, t, unit = kb, sb, tb, ub
-    ke, se, te, ue = _best_of(centre, rot, half, a, b, 6, 15)
+    ke, se, te, ue = _best_of(offset, rot, half, a, b, 6, 15)
     if se > sep + bias:
         best, sep, t, unit = ke, se, te, ue
     return sep, best, (neg(unit) if t < 0.0 else unit)
@@ -184,17 +186,7 @@ def _edge_point(centre, rot, half, a, b, best, axis):
     ia, ib = (best - 6) // 3, (best - 6) % 3
     pa, ea = _support_edge(centre, rot, half, a, ia, axis)
     pb, eb = _support_edge(centre, rot, half, b, ib, neg(axis))
-    r = sub(pa, pb)
-    aa, ee, bb = dot(ea, ea), dot(eb, eb), dot(ea, eb)
-    c, f = dot(ea, r), dot(eb, r)
-    denom = aa * ee - bb * bb
-    s = clip(safe_div(bb * f - c * ee, denom), 0.0, 1.0) if denom > 1e-12 * aa * ee else 0.0
-    t = safe_div(bb * s + f, ee)
-    if t < 0.0 or ee <= EPS:
-        s = clip(safe_div(-c, aa), 0.0, 1.0)
-    elif t > 1.0:
-        s = clip(safe_div(bb - c, aa), 0.0, 1.0)
-    t = clip(t, 0.0, 1.0)
+    s, t = segment_params(pa, ea, pb, eb)
     return scale(0.5, add(add(pa, scale(s, ea)), add(pb, scale(t, eb))))
 
 

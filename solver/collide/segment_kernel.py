@@ -65,8 +65,9 @@ def plane_segment(p0, nrm, c, d, half, r, margin, ctx, cb, n):
 
 
 @kernel(error_model="numpy")
-def segment_param(p1, e1, p2, e2):
-    """s ∈ [0, 1] of the closest point p1 + s·e1 to segment p2 + t·e2 (Ericson §5.1.9)."""
+def segment_params(p1, e1, p2, e2):
+    """s, t ∈ [0, 1] of the closest points p1 + s·e1, p2 + t·e2 of two segments
+    (solver.collide.segment.segment_params: Ericson §5.1.9, t from the first s)."""
     r = sub(p1, p2)
     a, e, b = dot(e1, e1), dot(e2, e2), dot(e1, e2)
     c, f = dot(e1, r), dot(e2, r)
@@ -77,7 +78,7 @@ def segment_param(p1, e1, p2, e2):
         s = clip(safe_div(-c, a), 0.0, 1.0)
     elif t > 1.0:
         s = clip(safe_div(b - c, a), 0.0, 1.0)
-    return s
+    return s, clip(t, 0.0, 1.0)
 
 
 @kernel(error_model="numpy")
@@ -86,11 +87,11 @@ def segment_segment(ca, da, la, ra, cb_, db, lb, rb, margin, ctx, cb, n):
 
     Feature 0 is the closest pair of points, so when even it is farther than the margin
     no feature can be kept and the pair is left before the other two are made.  The
-    slack covers rounding and segment_param's near-parallel branch (sin²θ ≤ 10⁻¹²: s = 0,
+    slack covers rounding and segment_params' near-parallel branch (sin²θ ≤ 10⁻¹²: s = 0,
     at most 2·la·θ ≤ 2·10⁻⁶·la from the closest point)."""
     pb = sub(cb_, scale(lb, db))
     eb = scale(2.0 * lb, db)
-    s = segment_param(sub(ca, scale(la, da)), scale(2.0 * la, da), pb, eb)
+    s, _ = segment_params(sub(ca, scale(la, da)), scale(2.0 * la, da), pb, eb)
     u0 = (2.0 * s - 1.0) * la
     slack = EARLY_OUT * (1.0 + 2.0 * (la + lb))
     if _segment_distance(add(ca, scale(u0, da)), pb, eb) - (ra + rb) > margin + slack:

@@ -6,11 +6,10 @@
 Same pipeline, rows, row order, warm start by row key, solvers (direct by an exact
 linear-time elimination over the joint tree, PGS by ``solver.solve.pgs``'s kernel), the same
 State and StepReport, and the same errors: whenever the compiled step meets something
-it does not do itself — a contact with a sleeping body (hybrid solver), a step the
-monitor rejects (non-finite, energy blow-up, joint torn apart), a degenerate direct
-system, inputs of unexpected shapes — it hands that step to ``solver.pipeline.step``,
-which then raises the usual SimulationError (step, time, bone) or computes the step.
-Results agree with the numpy step to rounding (the tests compare them).
+it does not do itself — a step the monitor rejects (non-finite, energy blow-up, joint
+torn apart), a degenerate direct system, inputs of unexpected shapes — it hands that step
+to ``solver.pipeline.step``, which then raises the usual SimulationError (step, time,
+bone) or computes the step.  Results agree with the numpy step to rounding (the tests compare them).
 
 Not compiled (``supports`` is False, ``fast_step`` simply runs the numpy step):
 method "reference".

@@ -11,8 +11,8 @@
 
 Packed arguments (see ``solver.compiled.pack``): m model arrays, g geometry, tree the
 elimination forest, ws/pws workspaces, opt/iopt options, st state arrays, inp input.
-Status FALLBACK hands the step back to the numpy implementation (a contact with a sleeping body, a
-monitor failure that must raise, a degenerate direct system).  ``_step`` returns SUBSTEP
+Status FALLBACK hands the step back to the numpy implementation (a monitor failure
+that must raise, a degenerate direct system).  ``_step`` returns SUBSTEP
 (rep_i[ReportInt.rows] equal substeps: solver.advance.substep) or RESTART (a BDF2 step
 without history: solver.advance.bdf2_kernel.RESTART's parts) before anything is computed;
 the entry points then take the step in those parts here (``step_parts``), so neither
@@ -143,7 +143,7 @@ def step_arrays(nb, nj, rows, nodes):
                     np.empty(rows, i)),
         SolverValues(np.empty(rows), np.empty(rows), np.empty(rows), np.empty(rows),
                      np.empty(rows), np.empty(rows), np.empty(rows)),
-        np.empty((nb, 6)), np.empty((nb, 6)), np.empty(NU_CAP * NU_CAP),
+        np.empty((nb, 6)), np.empty((nb, 6)), np.empty(NU_CAP * NU_CAP), np.empty(nb, b),
     )  # fmt: skip
     pred = Prediction(np.empty((nb, 3)), np.empty((nb, 4)), np.empty((nb, 3)), np.empty((nb, 3)),
                       np.empty((nb, 6)), np.empty((nj, 3)))  # fmt: skip

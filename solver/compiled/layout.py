@@ -92,7 +92,8 @@ TreeWork = structure("TreeWork", ("tw",), [
 
 Tree = structure("Tree", ("tree",), [
     ("order", "i"),  # static elimination order, children first
-    ("parent", "i"), ("rheo_start", "i"),  # node parents; first rheology row per joint
+    ("parent", "i"), ("rheo_start", "i"),  # this step's node parents; first rheology row a joint
+    ("forest_parent", "i"),  # the packed forest's node parents (ptree's: never written)
     ("no_rheo", "i"), ("sequence", "i"),  # −1 per joint; this step's order
     ("node_rows", "i6"), ("node_size", "i"), ("work", TreeWork),
 ])  # fmt: skip
@@ -230,6 +231,7 @@ SolverScratch = structure("SolverScratch", ("sv",), [
     ("flags", SolverFlags), ("ints", SolverIndex), ("values", SolverValues),
     ("vel_p", "f6"), ("pushed", "f6"),
     ("s_mat", "f"),  # hybrid.NU_CAP² entries
+    ("alone", "b"),  # per body: asleep, and a row acts on it (hybrid_kernel.sleeping_sides)
 ])  # fmt: skip
 
 WakeScratch = structure("WakeScratch", ("wake_scratch",), [("loaded", "b"), ("pointer", "f")])

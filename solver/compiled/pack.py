@@ -278,5 +278,6 @@ def _forest(model: Model, ncontact: int) -> tuple[Tree, ProjectionTree]:
     tw = TreeWork(np.zeros((nn, 6, 6)), np.zeros((nn, 6, 6)), np.zeros((nn, 6)), np.zeros((6, 6)))
     order_arr, no_rheo = np.array(order, np.int64), np.full(nj, -1, np.int64)
     rows, size = np.zeros((nn, 6), np.int64), np.zeros(nn, np.int64)
-    tree = Tree(order_arr, parent, rheo_start, no_rheo, np.zeros(nn, np.int64), rows, size, tw)
+    seq = np.zeros(nn, np.int64)
+    tree = Tree(order_arr, parent.copy(), rheo_start, parent, no_rheo, seq, rows, size, tw)
     return tree, ProjectionTree(order_arr, parent, no_rheo, rows, size, tw)

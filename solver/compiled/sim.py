@@ -18,8 +18,8 @@ On the doll's grip scene at h = 1 ms ``advance`` costs ~1.8 µs outside the kern
 work (packing the grip's input ~1.5; a step without input ~0.1; ``step`` ~2 µs more for
 the report), against ~35 µs for fast_step (docs/performance.md).  The states are exactly
 fast_step's (the same kernel, which also takes a subdivided step's parts in place:
-kernel.step_parts); a step the kernel hands back (a contact with a sleeping body, a monitor failure,
-an unsupported model) runs through ``fast_step`` on a snapshot, so errors and results
+kernel.step_parts); a step the kernel hands back (a monitor failure, an unsupported
+model) runs through ``fast_step`` on a snapshot, so errors and results
 are the same too.
 """
 
@@ -210,8 +210,8 @@ class Sim:
         self._handed_back = None
 
     def _hand_back(self, inp: StepInput) -> None:
-        """A step the kernel did not take in place, taken by fast_step (a sleeping contact,
-        a monitor failure: its error), then loaded."""
+        """A step the kernel did not take in place, taken by fast_step (a
+        monitor failure: its error), then loaded."""
         new, report = fast_step(self._fm, self.state, inp)
         self.load(new)
         self._handed_back = report

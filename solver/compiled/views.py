@@ -143,11 +143,12 @@ def tree_view(flat, k):
         leaf_i(flat, k + 0),  # order
         leaf_i(flat, k + 1),  # parent
         leaf_i(flat, k + 2),  # rheo_start
-        leaf_i(flat, k + 3),  # no_rheo
-        leaf_i(flat, k + 4),  # sequence
-        leaf_i6(flat, k + 5),  # node_rows
-        leaf_i(flat, k + 6),  # node_size
-        tree_work_view(flat, k + 7),  # work
+        leaf_i(flat, k + 3),  # forest_parent
+        leaf_i(flat, k + 4),  # no_rheo
+        leaf_i(flat, k + 5),  # sequence
+        leaf_i6(flat, k + 6),  # node_rows
+        leaf_i(flat, k + 7),  # node_size
+        tree_work_view(flat, k + 8),  # work
     )
 
 
@@ -230,11 +231,11 @@ def packed_view(flat, k):
         model_arrays_view(flat, k + 0),  # m
         geometry_view(flat, k + 22),  # g
         tree_view(flat, k + 38),  # tree
-        projection_tree_view(flat, k + 49),  # ptree
-        workspace_view(flat, k + 58),  # ws
-        projection_workspace_view(flat, k + 86),  # pws
-        leaf_f(flat, k + 104),  # opt
-        leaf_i(flat, k + 105),  # iopt
+        projection_tree_view(flat, k + 50),  # ptree
+        workspace_view(flat, k + 59),  # ws
+        projection_workspace_view(flat, k + 87),  # pws
+        leaf_f(flat, k + 105),  # opt
+        leaf_i(flat, k + 106),  # iopt
     )
 
 
@@ -309,6 +310,7 @@ def solver_scratch_view(flat, k):
         leaf_f6(flat, k + 21),  # vel_p
         leaf_f6(flat, k + 22),  # pushed
         leaf_f(flat, k + 23),  # s_mat
+        leaf_b(flat, k + 24),  # alone
     )
 
 
@@ -364,12 +366,12 @@ def scratch_view(flat, k):
         limit_scratch_view(flat, k + 12),  # limit
         leaf_b(flat, k + 14),  # flows
         solver_scratch_view(flat, k + 15),  # solvers
-        prediction_view(flat, k + 39),  # pred
-        leaf_f6(flat, k + 45),  # moving
-        leaf_f(flat, k + 46),  # stage_opt
-        leaf_f(flat, k + 47),  # part_opt
-        leaf_f(flat, k + 48),  # part_pointer
-        leaf_f(flat, k + 49),  # part_report
+        prediction_view(flat, k + 40),  # pred
+        leaf_f6(flat, k + 46),  # moving
+        leaf_f(flat, k + 47),  # stage_opt
+        leaf_f(flat, k + 48),  # part_opt
+        leaf_f(flat, k + 49),  # part_pointer
+        leaf_f(flat, k + 50),  # part_report
     )
 
 
@@ -386,8 +388,8 @@ def warm_view(flat, k):
 def step_work_view(flat, k):
     return StepWork(
         scratch_view(flat, k + 0),  # scratch
-        leaf_i(flat, k + 50),  # keys
-        leaf_f(flat, k + 51),  # lam
+        leaf_i(flat, k + 51),  # keys
+        leaf_f(flat, k + 52),  # lam
     )
 
 
@@ -395,13 +397,13 @@ def step_work_view(flat, k):
 def sim_arrays_view(flat, k):
     return SimArrays(
         packed_view(flat, k + 0),  # packed
-        state_set_view(flat, k + 106),  # set0
-        state_set_view(flat, k + 123),  # set1
-        warm_view(flat, k + 140),  # warm
-        leaf_i(flat, k + 143),  # rep_i
-        leaf_f(flat, k + 144),  # rep_f
-        step_work_view(flat, k + 145),  # work
-        state_set_view(flat, k + 197),  # spare
-        leaf_i(flat, k + 214),  # spare_keys
-        leaf_f(flat, k + 215),  # spare_lam
+        state_set_view(flat, k + 107),  # set0
+        state_set_view(flat, k + 124),  # set1
+        warm_view(flat, k + 141),  # warm
+        leaf_i(flat, k + 144),  # rep_i
+        leaf_f(flat, k + 145),  # rep_f
+        step_work_view(flat, k + 146),  # work
+        state_set_view(flat, k + 199),  # spare
+        leaf_i(flat, k + 216),  # spare_keys
+        leaf_f(flat, k + 217),  # spare_lam
     )

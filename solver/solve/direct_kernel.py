@@ -377,16 +377,20 @@ def backward_pass(seq, nseq, parent, nb, size, tw, x, bwd, bwd_tag):
 
 
 @kernel(error_model="numpy", _nrt=False)
-def forest_sequence(tree, nb, movable, free_grip, ngrip, body, leaves, asleep, joint_bone):
+def forest_sequence(tree, nb, movable, free_grip, ngrip, body, leaves, sleeping, joint_bone):
     """Fill the elimination sequence (seq, parent, rows, size of ``tree``) for the joint
     forest and, with ngrip > 0, the grip's node of the rows free_grip[:ngrip], a leaf of
     the gripped body (its own root when the body cannot move); returns its length.
     leaves = (rw, normal rows, count, first_friction): leaf contacts (solver.solve.hybrid),
     a node each of its normal row c and its two friction rows first_friction[c] and the
     next (none when first_friction[c] < 0), hung from the contact's movable body.
-    Sleeping islands (asleep (nb,) bool) are left out: each is a whole component of the
-    forest, with no rows (solver.advance.sleep)."""
-    order, parent, rheo_start, _, seq, rows, size, _ = tree
+    sleeping = (asleep, alone) (nb,) bool: sleeping islands are left out, each a whole
+    component of the forest without rows (solver.advance.sleep), but for the bodies in
+    ``alone``, which rows act on (an awake body resting on one it did not wake): each is a
+    root of its own, free (its joints have no rows this step), as in the numpy step.  The
+    other nodes take their packed parents (forest_parent)."""
+    order, parent, rheo_start, forest_parent, _, seq, rows, size, _ = tree
+    asleep, alone = sleeping
     node = nb + len(rheo_start)
     nseq = 0
     if ngrip:
@@ -406,7 +410,11 @@ def forest_sequence(tree, nb, movable, free_grip, ngrip, body, leaves, asleep, j
             size[leaf], rows[leaf, 1], rows[leaf, 2] = 3, f, f + 1
     for i in order:
         if asleep[i] if i < nb else asleep[joint_bone[i - nb]]:
-            continue
+            if not (i < nb and alone[i]):
+                continue
+            parent[i] = -1
+        else:
+            parent[i] = forest_parent[i]
         seq[nseq] = i
         nseq += 1
         size[i] = node_rows(i, nb, rheo_start, rows[i])

@@ -145,8 +145,6 @@ def solve(bw, tree, rw, opt, iopt, warm, n, vel_free, grip, asleep, sv, lam0, la
         )  # PGS reads every row's
         for i in range(n):
             lam0[i] = lam[i]
-    if hybrid and iopt[IOpt.sleep] and touches_sleeper(rw, ne, n, asleep):
-        return FALLBACK, 0, 0.0, SOLVER_HYBRID
     if hybrid:
         code, sweeps, residual = hybrid_solve(
             bw, tree, opt[Opt.h], rw, n, ne, vel_free, lam0, iopt[IOpt.iterations], grip,
@@ -159,19 +157,6 @@ def solve(bw, tree, rw, opt, iopt, warm, n, vel_free, grip, asleep, sv, lam0, la
         sv.values.s_vec,
     )  # fmt: skip
     return OK, sweeps, residual, SOLVER_PGS
-
-
-@kernel(error_model="numpy")
-def touches_sleeper(rw, ne, n, asleep):
-    """Whether a row after the joints' acts on a sleeping body (an awake body resting on
-    a sleeping one that it did not wake: solver.advance.sleep).  The hybrid's forest
-    leaves sleeping islands out, so such a step is handed back: the numpy step solves it
-    with the sleeping body in the system, as PGS does here."""
-    a, b = rw.body_a, rw.body_b
-    found = False
-    for i in range(ne, n):
-        found = found or (a[i] >= 0 and asleep[a[i]]) or (b[i] >= 0 and asleep[b[i]])
-    return found
 
 
 @kernel(error_model="numpy", _nrt=False)

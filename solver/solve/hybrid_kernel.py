@@ -182,13 +182,13 @@ def _round(bw, tree, h, rw, lam, vel_p, its, nu, nodes, lam0, iters, asleep, sv,
     bw: the solvers' model arrays (solver.solve.dispatch_kernel.solve); nodes = (free grip rows,
     their count, the gripped body, the sticking leaf contacts' normal rows, their count,
     each normal row's first friction row); sv: the solvers' scratch (kernel.step_arrays)."""
-    _, parent, _, _, seq, rows, size, tw = tree
+    _, parent, _, _, _, seq, rows, size, tw = tree
     joint_bone, mass, movable, resp_a, resp_b, _, inertia_w = bw
     nb = len(vel_p)
     free_grip, ngrip, body, leaves, nleaf, first_friction = nodes
     leaf_nodes = (rw, leaves, nleaf, first_friction)
     nseq = forest_sequence(
-        tree, nb, movable, free_grip, ngrip, body, leaf_nodes, asleep, joint_bone
+        tree, nb, movable, free_grip, ngrip, body, leaf_nodes, (asleep, sv.alone), joint_bone
     )
     init_nodes(seq, nseq, nb, rw, vel_p, h, mass, inertia_w, rows, size, tw.block, tw.rhs)
     if not tree_factor(seq, nseq, parent, nb, rw, rows, size, tw):
@@ -223,7 +223,8 @@ def hybrid_solve(bw, tree, h, rw, n, ne, vel_free, lam0, iterations, grip, skips
     its bounds), 2: the exact system is degenerate. bw: the solvers' model arrays
     (solver.solve.dispatch_kernel.solve); h: the step; skips = (leave dormant rows out of
     the iteration, solve leaf contacts in the forest: Options.dormant_rows, leaf_contacts);
-    asleep (nb,) bool: sleeping bodies (their islands are not in the forest); sv: the
+    asleep (nb,) bool: sleeping bodies (their islands are not in the forest, but for the
+    bodies rows act on: ``sleeping_sides``); sv: the
     solvers' scratch (kernel.step_arrays: nothing is allocated unless more than NU_CAP rows
     are iterated). Without iterated rows (a table of joint and grip rows only) this is the
     direct solve's active set on the grip (kernel.direct)."""
@@ -240,6 +241,7 @@ def hybrid_solve(bw, tree, h, rw, n, ne, vel_free, lam0, iterations, grip, skips
         if not skip:
             dormant[i] = False
     leaf_contacts(rw, ne, n, bw.inv_mass, asleep, leaves_on, leaf, first_friction)
+    sleeping_sides(rw, ne, n, asleep, sv.alone)
     lo, hi, kind, fric = rw.lo, rw.hi, rw.kind, rw.fric_of
     for i in range(ne, n):  # solver.solve.hybrid.iterated_first
         c = fric[i]
@@ -304,6 +306,22 @@ def leaf_contacts(rw, ne, n, movable, asleep, on, leaf, first_friction):
     for i in range(ne, n):
         if fric[i] >= 0:
             leaf[i] = leaf[fric[i]]
+
+
+@kernel(error_model="numpy", inline="always")
+def sleeping_sides(rw, ne, n, asleep, alone):
+    """alone[b] ← body b sleeps and one of rows ne … n − 1 acts on it: an awake body resting
+    on a sleeping one that it did not wake (solver.advance.sleep).  The forest takes such a
+    body as a free root of its own (direct_kernel.forest_sequence), as the numpy step keeps
+    it in its system; its pose stays as it was (the step keeps sleeping bodies')."""
+    a, b = rw.body_a, rw.body_b
+    for k in range(len(alone)):
+        alone[k] = False
+    for i in range(ne, n):
+        if a[i] >= 0 and asleep[a[i]]:
+            alone[a[i]] = True
+        if b[i] >= 0 and asleep[b[i]]:
+            alone[b[i]] = True
 
 
 @kernel(error_model="numpy")

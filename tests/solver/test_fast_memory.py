@@ -51,8 +51,13 @@ def _rope():
 
 
 def _boxes():
-    model = build_model(box_stack(0.4)).with_options(h=0.005)  # 4 of its steps handed back
+    model = build_model(box_stack(0.4)).with_options(h=0.005)  # box–box; sleeper under a box
     return model, initial_state(model), [None] * 200
+
+
+def _reference():
+    model = build_model(chain(3, 0.01)).with_options(method="reference")  # all handed back
+    return model, initial_state(model), [None] * 20
 
 
 def _lying_chain():
@@ -65,7 +70,8 @@ SCENES = {
     "doll-hybrid": lambda: _doll("hybrid", 100),
     "chain-direct-projection": _tumbling_chain,
     "rope-substeps": _rope,
-    "boxes-handed-back": _boxes,
+    "boxes": _boxes,
+    "reference-handed-back": _reference,
     "schur-beyond-scratch": _lying_chain,
 }
 
