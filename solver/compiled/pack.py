@@ -22,6 +22,7 @@ import numpy as np
 
 from solver.advance.sleep import body_islands
 from solver.advance.substep import model_levers
+from solver.collide import scene_kernel as sk
 from solver.compiled.clock import STAGES
 from solver.compiled.flat import flatten
 from solver.compiled.layout import (
@@ -49,7 +50,10 @@ from solver.rows.joints_kernel import limit_thresholds
 METHODS = {"auto": 0, "pgs": 1, "direct": 2, "hybrid": 3}
 INTEGRATORS = ("euler", "bdf2")
 FEATURES = (2, 8, 3, 3, 16)  # most contacts per pair of each group
-_GROUP = {(0, 1): 0, (0, 2): 1, (1, 1): 2, (1, 2): 3, (2, 2): 4}  # scene_kernel's GROUP_*
+_GROUP = {  # shape classes (plane 0, segment 1, box 2) → the pair's group in collide_scene
+    (0, 1): sk.GROUP_PLANE_SEGMENT, (0, 2): sk.GROUP_PLANE_BOX, (1, 1): sk.GROUP_SEGMENT_SEGMENT,
+    (1, 2): sk.GROUP_SEGMENT_BOX, (2, 2): sk.GROUP_BOX_BOX,
+}  # fmt: skip
 _CLASS = np.array([0, 1, 1, 2])
 
 

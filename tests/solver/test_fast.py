@@ -440,4 +440,4 @@ def test_a_box_dropped_on_a_box_matches_and_comes_to_rest_on_it(turn, monkeypatc
     assert handed == [] and boxbox > 150 and on_sleeper > 0  # measured: 196 and 8 steps
     height = a.body_pos[upper, 1] - (2 * LOWER[1] + UPPER[1])
     assert abs(height) < 2e-7, height
-    assert np.abs(a.body_vel).max() < 1e-5
+    assert np.abs(a.body_vel).max() < 1e-5  # measured 2.6e-6 (both turns)
