@@ -21,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from solver import pipeline
+from solver.advance import joint_space
 from solver.model import Model
 from solver.rows.grip import follow_steps
 from solver.state import State, StepInput, StepReport, initial_state
@@ -39,12 +40,14 @@ class Engine:
             )
         self.model = model
         self.packed = None
+        self.joint_space = False
         if model.options.engine == "compiled":
             from solver.compiled.fast import fast_step  # numba loads only for the compiled step
             from solver.compiled.pack import pack
 
             self.packed = pack(model)
             self._fast_step = fast_step  # (an import in ``step`` would cost ~1 µs a step)
+            self.joint_space = joint_space.unsupported(model) is None
 
     @property
     def compiled(self) -> bool:
@@ -58,11 +61,18 @@ class Engine:
         return self._fast_step(self.packed, state, inp)
 
     def stepper(self, state: State | None = None):
-        """An in-place stepper from ``state`` (the rest state when None)."""
+        """An in-place stepper from ``state`` (the rest state when None): a
+        solver.compiled.joint_sim.JointSim when ``joint_space`` (the model is one tree of
+        spring-damper joints stepped with bdf2: solver.advance.joint_space), else a
+        solver.compiled.sim.Sim."""
         if self.packed is None:
             return NumpyStepper(self.model, state)
         from solver.compiled.sim import Sim
 
+        if self.joint_space:
+            from solver.compiled.joint_sim import JointSim
+
+            return JointSim(self.model, state, lambda s: Sim(self.packed, s))
         return Sim(self.packed, state)
 
 

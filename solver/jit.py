@@ -25,6 +25,7 @@ from numba.core.caching import CacheImpl, InTreeCacheLocator
 ROOT = Path(__file__).resolve().parent
 PYTHON_ONLY = (
     "pipeline.py", "engine.py", "compiled/fast.py", "compiled/pack.py", "compiled/sim.py",
+    "compiled/joint_sim.py",
 )  # fmt: skip
 """Modules with no compiled function that no compiled function's module imports
 (tests/solver/test_jit.py): editing them does not recompile the kernels."""

@@ -90,7 +90,7 @@ def flatten(parts: tuple) -> tuple[tuple, tuple]:
 
 
 @intrinsic
-def _row_pointer(typingctx, buf, row):
+def row_pointer(typingctx, buf, row):
     """The address of row ``row`` of buf (C-contiguous), as a typed pointer."""
 
     def codegen(context, builder, signature, args):
@@ -107,14 +107,14 @@ def _row_pointer(typingctx, buf, row):
 def leaf(buf, lay, k):
     """Leaf k (layout lay): its rows of buf, as an array that holds no reference to buf
     (module docstring)."""
-    return carray(_row_pointer(buf, lay[k, 0]), (lay[k, 1],) + buf.shape[1:])
+    return carray(row_pointer(buf, lay[k, 0]), (lay[k, 1],) + buf.shape[1:])
 
 
 @kernel(_nrt=True)  # returns a view: never without NRT (kernel._step)
 def square(buf, n):
     """The first n² entries of buf (1-D, C-contiguous) as an (n, n) array that holds no
     reference to buf (module docstring: the caller keeps buf alive)."""
-    return carray(_row_pointer(buf, 0), (n, n))
+    return carray(row_pointer(buf, 0), (n, n))
 
 
 @kernel()

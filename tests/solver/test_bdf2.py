@@ -111,10 +111,12 @@ def test_creep_converges_at_second_order():
     assert errors[0] < euler[0] / 6.0  # measured: 1/7.8 of the paper's error at h = 5 ms
 
 
-def _chain_tips(h: float, duration: float) -> tuple[np.ndarray, np.ndarray]:
+def released_chain_tips(h: float, duration: float, joint_space: bool = False) -> tuple:
+    """A 3-link Voigt chain released from a 3-D bend, stepped with bdf2 (with rows, or in
+    joint space): (its tips, the truth's, the stepper) after ``duration``."""
     model = likeforlike.voigt_model("chain.yaml", 3, likeforlike.CHAIN_K, likeforlike.CHAIN_D)
     start = likeforlike.posed(model, np.random.default_rng(5).normal(size=(3, 3)) * 0.4)
-    model = model.with_options(h=h, integrator="bdf2")
+    model = model.with_options(h=h, integrator="bdf2", joint_space=joint_space)
     stepper = Engine(model).stepper(start)
     for _ in range(round(duration / h)):
         stepper.advance(None)
@@ -124,13 +126,13 @@ def _chain_tips(h: float, duration: float) -> tuple[np.ndarray, np.ndarray]:
     y = ode.integrate(tree, ode.joint_state(tree, start.body_quat, start.body_omega),
                       np.array([duration]))  # fmt: skip
     pos, q = ode.body_poses(tree, y)
-    return tips, points_on_bones(model, pos, q, model.bone_tail0)[0]
+    return tips, points_on_bones(model, pos, q, model.bone_tail0)[0], stepper
 
 
 def test_a_released_chain_converges_to_the_truth_at_second_order():
     errors = []
     for h in (0.004, 0.002, 0.001):
-        tips, truth = _chain_tips(h, 0.2)
+        tips, truth, _ = released_chain_tips(h, 0.2)
         errors.append(np.linalg.norm(tips - truth, axis=1).max())
     ratios = np.array(errors[:-1]) / np.array(errors[1:])
     # measured: errors 2.5e-4, 6.3e-5, 1.6e-5 m; ratios 4.02 and 4.09
@@ -169,7 +171,7 @@ def test_numpy_and_compiled_bdf2_agree_on_large_pulled_steps():
     # part's end.  The compiled step takes them in the kernel (kernel.step_parts), the
     # numpy step by solver.advance.substep.run_parts.
     sc = likeforlike.scene("doll-pull")
-    model = sc.model.with_options(h=0.1, integrator="bdf2")
+    model = sc.model.with_options(h=0.1, integrator="bdf2", joint_space=False)  # the row step
     inputs = likeforlike.our_inputs(sc, 0.1, 10)
     runs, parts = [], []
     for engine in ("numpy", "compiled"):
