@@ -10,6 +10,7 @@ import numpy as np
 
 from puppetcli.commands.report import JSON_OPTION, emit
 from puppetcli.rig.load import load_rig
+from solver.advance import joint_space
 from solver.model import Model, Options, build_model
 
 
@@ -43,12 +44,24 @@ def facts(model: Model) -> dict[str, Any]:
         "contact_slop": opt.contact_slop,
         "iterations": opt.iterations,
         "warm_start": opt.warm_start,
-        "solver": solver_words(opt, two_sided_only=not (model.has_collision or model.has_limits)),
+        "solver": solver_words(model),
     }
 
 
-def solver_words(opt: Options, two_sided_only: bool) -> str:
-    """What solves each step, as solver.solve.dispatch decides it for this scene."""
+def solver_words(model: Model) -> str:
+    """What solves each step: the joint-space step when the model qualifies for it
+    (solver.advance.joint_space), else the rows' solver as solver.solve.dispatch decides
+    it for this scene."""
+    if joint_space.unsupported(model) is None:
+        return (
+            "joint space (a tree of spring-damper joints under bdf2: the articulated-body "
+            "recursion along the joints, no rows)"
+        )
+    return rows_solver_words(model.options, not (model.has_collision or model.has_limits))
+
+
+def rows_solver_words(opt: Options, two_sided_only: bool) -> str:
+    """What solves a step's rows, as solver.solve.dispatch decides it for this scene."""
     sweeps = f"{opt.iterations} PGS sweeps"
     if opt.method == "auto" and two_sided_only:
         return "direct (auto: this scene has two-sided rows only)"

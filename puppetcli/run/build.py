@@ -14,14 +14,16 @@ __all__ = ["compile_engine", "compiled_ready", "marker"]
 def compile_engine(model) -> None:
     """One throwaway step of ``model`` from rest on each of its compiled engine's paths, in
     place (a run's steps), along a path (a batch of them) and to a new State (a step the
-    stepper hands back): numba compiles or loads them now rather than in the middle of a
-    run.  Marks the build done (``compiled_ready``)."""
+    stepper hands back), and the joint-space step's kernels: numba compiles or loads them
+    now rather than in the middle of a run.  Marks the build done (``compiled_ready``)."""
     import numpy as np
 
+    from solver.compiled.joint_sim import compile_kernels
     from solver.engine import Engine
     from solver.state import initial_state
 
-    engine = Engine(model.with_options(engine="compiled"))
+    compile_kernels()  # the joint-space step's (solver.advance.joint_space), for any model
+    engine = Engine(model.with_options(engine="compiled", joint_space=False))  # the rows'
     stepper = engine.stepper()
     stepper.advance()
     path = (np.zeros((1, 3)), np.tile([1.0, 0.0, 0.0, 0.0], (1, 1)), np.zeros((1, 3)))

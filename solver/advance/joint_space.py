@@ -5,8 +5,8 @@ limits, collisions or free bodies), stepped with ``integrator: bdf2``, needs non
 maximal-coordinate machinery: no anchor rows (the joints cannot come apart), no contact,
 no LCP.  Its unknowns are then 3 a joint, u_j: the child's angular velocity relative to
 its parent, in the parent's frame (the rows' rate w_k = a_k·(ω_c − ω_p)); the bodies'
-velocities are V = J u (spatial, about the world origin: V_b = (ω_b, v at the origin)),
-their positions follow from the joints.
+velocities are V = J u (spatial, about one point O, the tree's first fixed anchor: V_b =
+(ω_b, v at O)); their positions, taken from O, follow from the joints.
 
 **The step** is the same BDF2 as solver.advance.bdf2, on the same momenta.  With r =
 h/h_prev, c = r²/(1 + 2r), γ = h(1 + r)/(1 + 2r), each body's world quantities are

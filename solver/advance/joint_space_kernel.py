@@ -43,11 +43,14 @@ class Params(NamedTuple):
 
 
 class Arrays(NamedTuple):
-    """The state (world frame, per body (nb1, ·) with the world last): quat (w,x,y,z) and
+    """The state (world axes, per body (nb1, ·) with the world last): quat (w,x,y,z) and
     quat_prev (the last part's start); omega rad/s; momentum and momentum_prev (6,): L about
-    the centre of mass, N·m·s, then p, N·s; pos m; vel m/s (p/m); rest (n,4): each tree
-    joint's elastic rest (parent frame); deflection (nj,3) rad and torque (nj,3) N·m per
-    model joint; clock (4,): CLOCK_* below."""
+    the centre of mass, N·m·s, then p, N·s; pos m from the step's origin (OPT_ORIGIN: the
+    tree's first fixed anchor; the step's spatial quantities are about it, and about the
+    world origin they would lose digits on bodies far from it); vel m/s (p/m); rest (n,4):
+    each tree joint's elastic rest (parent frame); deflection (nj,3) rad and torque (nj,3)
+    N·m per model joint; clock (4,): CLOCK_* below; world_pos m: pos from the world's
+    origin."""
 
     quat: np.ndarray
     quat_prev: np.ndarray
@@ -60,11 +63,12 @@ class Arrays(NamedTuple):
     deflection: np.ndarray
     torque: np.ndarray
     clock: np.ndarray
+    world_pos: np.ndarray
 
 
 class Work(NamedTuple):
     """A part's workspace: quat_hat q̂ and quat_pred q̃ (nb1,4); motion S (n,6,3); inertia Φ
-    and articulated I^A (nb1,6,6) about the world origin; bias p^A, velocity V, residual f
+    and articulated I^A (nb1,6,6) about the step's origin; bias p^A, velocity V, residual f
     (nb1,6); pivot_inv D⁻¹ (n,3,3), coupling U = I^A S (n,6,3), rhs (n,3); rates (n,9): u*,
     θ*, u."""
 
@@ -83,11 +87,11 @@ class Work(NamedTuple):
 
 
 WIDTHS = (3, 3, 3, 3, 1, 9, 8, 4, 4, 3, 6, 6, 3, 3, 4, 3, 3, 4, 4, 4, 18, 36, 36, 6, 6, 6, 9, 18,
-          3, 9)  # fmt: skip
-ROWS = "nnnnbbobbbbbbbnjjobbnbbbbbnnnn"
+          3, 9, 3)  # fmt: skip
+ROWS = "nnnnbbobbbbbbbnjjobbnbbbbbnnnnb"
 """Each float field's width and what counts its rows (n joints of the tree, b bodies and
 the world, j joints of the model, o one), in ``views``' order."""
-OPT_GRAVITY, OPT_MAX_SPEED, OPT_MAX_SPIN = 0, 3, 4
+OPT_GRAVITY, OPT_MAX_SPEED, OPT_MAX_SPIN, OPT_ORIGIN = 0, 3, 4, 5
 CLOCK_HPREV, CLOCK_GRIP_FORCE = 0, 1
 GRIP_BODY, GRIP_ANCHOR, GRIP_TARGET, GRIP_RATE, GRIP_K, GRIP_D, GRIP_SIZE = 0, 1, 4, 7, 10, 11, 12
 """The grip vector: the body (-1: none), its point in the body frame, the target point at
@@ -136,7 +140,7 @@ def views(fb, ib):
              _field(fb, off, 10, nb1, 6), _field(fb, off, 11, nb1, 6),
              _field(fb, off, 12, nb1, 3), _field(fb, off, 13, nb1, 3), _field(fb, off, 14, n, 4),
              _field(fb, off, 15, nj, 3), _field(fb, off, 16, nj, 3),
-             _field(fb, off, 17, 1, 4)[0, :])  # fmt: skip
+             _field(fb, off, 17, 1, 4)[0, :], _field(fb, off, 30, nb1, 3))  # fmt: skip
     work = Work(_field(fb, off, 18, nb1, 4), _field(fb, off, 19, nb1, 4),
             _blocks(fb, off, 20, n, 6),
             _blocks(fb, off, 21, nb1, 6), _blocks(fb, off, 22, nb1, 6),
@@ -225,7 +229,7 @@ def place(tree, model, Q, X):
 
 @kernel(error_model="numpy")
 def spatial_inertia(R, ib, m, x, out):
-    """The 6×6 spatial inertia at the world origin (angular first) of a body of mass m,
+    """The 6×6 spatial inertia at the step's origin (angular first) of a body of mass m,
     body-frame inertia ib about its centre x, turned by R."""
     for i in range(3):
         for j in range(3):
@@ -483,11 +487,13 @@ def _outputs(tree, model, state, grip):
     deflection and spring-damper torque, the grip's force on its bone."""
     child, parent, joint = tree.child, tree.parent, tree.joint
     kf, df, mass = model.kf, model.df, model.mass
-    Q, _, Om, P, _, X, Vl, anchor, delta, torque, clock = state
+    Q, _, Om, P, _, X, Vl, anchor, delta, torque, clock, world = state
+    origin = model.options[OPT_ORIGIN : OPT_ORIGIN + 3]
     for k in range(len(child)):
         c, p, j = child[k], parent[k], joint[k]
         for i in range(3):
             Vl[c, i] = P[c, 3 + i] / mass[c]
+            world[c, i] = X[c, i] + origin[i]
         Rp = rotm(_q(Q, p))
         dw = (Om[c, 0] - Om[p, 0], Om[c, 1] - Om[p, 1], Om[c, 2] - Om[p, 2])
         th = qlog(qmul(qmul(qconj(_q(Q, p)), _q(Q, c)), qconj(_q(anchor, k))))

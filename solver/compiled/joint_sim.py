@@ -36,6 +36,7 @@ from solver.advance.joint_space_kernel import (
     OPT_GRAVITY,
     OPT_MAX_SPEED,
     OPT_MAX_SPIN,
+    OPT_ORIGIN,
     advance,
     offsets,
     python_views,
@@ -75,22 +76,26 @@ class JointSim:
         o = model.options
         opt[OPT_GRAVITY : OPT_GRAVITY + 3] = o.gravity
         opt[OPT_MAX_SPEED], opt[OPT_MAX_SPIN] = o.max_speed, o.max_angular_speed
+        first = initial_state(model) if state is None else state
+        self._origin = _origin(model, tr, first)
+        opt[OPT_ORIGIN : OPT_ORIGIN + 3] = self._origin
         self._grip = np.zeros(GRIP_SIZE)
         self._grip[GRIP_BODY] = -1.0
         self._h = o.h
         self._steady = joint_space.parts(o.h, joint_space.part_length(o.h), False)
         self._nb = nb
-        self.load(initial_state(model) if state is None else state)
+        self.load(first)
 
     def load(self, state: State) -> None:
         """Make ``state`` the current state (copied); the next step restarts BDF2."""
         self._taken = None
         nb, moving = self._nb, self.model.body_inv_mass > 0.0
-        Q, Qp, Om, P, Pp, X, Vl, anchor, delta, torque, clock = self._s
+        Q, Qp, Om, P, Pp, X, Vl, anchor, delta, torque, clock, world = self._s
         if state.body_pos.shape != (nb, 3) or state.joint_anchor.shape != (self.model.njoint, 4):
             raise ValueError(f"JointSim.load: not a state of this model ({nb} bodies)")
         Q[:nb], Q[nb] = state.body_quat, quat.IDENTITY
-        X[:nb], X[nb] = state.body_pos, 0.0
+        X[:nb], X[nb] = state.body_pos - self._origin, -self._origin
+        world[:nb], world[nb] = state.body_pos, 0.0
         Om[:nb], Om[nb] = np.where(moving[:, None], state.body_omega, 0.0), 0.0
         Vl[:nb], Vl[nb] = np.where(moving[:, None], state.body_vel, 0.0), 0.0
         for b in range(nb):
@@ -131,8 +136,9 @@ class JointSim:
         self._fresh()
         nb, s, k = self._nb, self._s, self._kept
         return State(
-            time=self._time, step=self._steps, body_pos=own(s.pos[:nb]), body_quat=own(s.quat[:nb]),
-            body_vel=own(s.vel[:nb]), body_omega=own(s.omega[:nb]), joint_q_sf=own(s.deflection),
+            time=self._time, step=self._steps, body_pos=own(s.world_pos[:nb]),
+            body_quat=own(s.quat[:nb]), body_vel=own(s.vel[:nb]), body_omega=own(s.omega[:nb]),
+            joint_q_sf=own(s.deflection),
             joint_yielded=k.joint_yielded, joint_anchor=k.joint_anchor,
             joint_torque_avg=k.joint_torque_avg, joint_torque=own(s.torque),
         )  # fmt: skip
@@ -196,7 +202,7 @@ class JointSim:
                 self._offset = bool(c.offset.any())
         if c is not None:
             ptr = inp.pointer
-            g[GRIP_TARGET : GRIP_TARGET + 3] = ptr.pos
+            g[GRIP_TARGET : GRIP_TARGET + 3] = ptr.pos - self._origin
             g[GRIP_RATE : GRIP_RATE + 3] = ptr.vel
             if self._offset:  # the grip point is off the pointer's centre
                 lever = quat.rotate(ptr.quat, c.offset)
@@ -208,7 +214,7 @@ class JointSim:
         self._fresh()
         nb, s = self._nb, self._s
         vel = np.hstack([s.vel[:nb], s.omega[:nb]])
-        check_state(self.model, self._steps, self._time, s.pos[:nb], s.quat[:nb], vel)
+        check_state(self.model, self._steps, self._time, s.world_pos[:nb], s.quat[:nb], vel)
         raise SimulationError("state became non-finite (NaN or infinity)", self._steps,
                               self._time, None)  # fmt: skip
 
@@ -258,3 +264,27 @@ def _same_spring(a, b) -> bool:
         return a is b
     return (a.body == b.body and a.stiffness == b.stiffness and a.damping == b.damping
             and np.array_equal(a.anchor, b.anchor))  # fmt: skip
+
+
+def _origin(model: Model, tree: joint_space.JointTree, state: State) -> np.ndarray:
+    """The step's origin: the world position of the tree's first joint's anchor on its
+    fixed parent (every body's spatial quantities are taken about it)."""
+    p, anchor = int(model.joint_parent[tree.joint[0]]), model.joint_anchor_parent[tree.joint[0]]
+    if p < 0:
+        return anchor.copy()
+    return state.body_pos[p] + quat.rotate(state.body_quat[p], anchor)
+
+
+def compile_kernels() -> None:
+    """Compile (or load from numba's cache) every kernel a JointSim calls, on buffers of a
+    one-joint tree with nothing in it (the results are discarded): a build of the compiled
+    step covers them whichever model it is made with (puppetcli.run.build)."""
+    off = offsets(1, 2, 1)
+    fb = np.zeros(off[-1])
+    ib = np.array([1, 2, 1, *off, 0, 1, 0], np.int64)
+    python_views(fb, ib)
+    grip = np.zeros(GRIP_SIZE)
+    grip[GRIP_BODY] = -1.0
+    with np.errstate(all="ignore"):  # a massless body: its outputs are NaN, and unused
+        advance(fb, ib, np.zeros((0, 2)), grip)
+        refresh(fb, ib, grip)

@@ -19,7 +19,7 @@ from mcap.reader import make_reader
 
 from puppetcli.cli import cli
 from puppetcli.rig.load import load_rig, rig_from_text
-from solver.engine import NumpyStepper
+from solver.engine import Engine, NumpyStepper
 from solver.model import build_model
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -121,25 +121,33 @@ bones:
 """
 
 
-@pytest.mark.parametrize("rig", ["doll", "hanging"])
+SPRINGS_RIG = NO_CONTACT_RIG.replace("dd: 50.0", "plastic: false") + "solver: {integrator: bdf2}\n"
+
+
+@pytest.mark.parametrize("rig", ["doll", "hanging", "springs"])
 def test_validate_names_the_solver_the_steps_use(rig: str, tmp_path: Path) -> None:
-    """validate's solver line, against the solver each of 200 steps reports using."""
+    """validate's solver line, against the solver each of 200 steps reports using (the
+    numpy step's for the rows; the in-place stepper's for a tree of springs under bdf2)."""
     if rig == "doll":
         spec, path = load_rig(DOLL), DOLL
     else:
-        path = tmp_path / "hanging.yaml"
-        path.write_text(NO_CONTACT_RIG)
-        spec = rig_from_text(NO_CONTACT_RIG, str(path))
+        text = NO_CONTACT_RIG if rig == "hanging" else SPRINGS_RIG
+        path = tmp_path / f"{rig}.yaml"
+        path.write_text(text)
+        spec = rig_from_text(text, str(path))
     words = run_json("validate", path)["solver"]
-    engine = NumpyStepper(build_model(spec))
+    model = build_model(spec)
+    engine = Engine(model).stepper() if rig == "springs" else NumpyStepper(model)
     used = set()
     for _ in range(200):
         engine.advance()
         used.add(engine.report.solver)
     if rig == "doll":  # the doll stands on the ground: contact rows every step
         assert used == {"hybrid"} and words.startswith("auto: direct on steps with two-sided")
-    else:
+    elif rig == "hanging":  # a series damper: rows
         assert used == {"direct"} and words.startswith("direct (auto: this scene has two-sided")
+    else:
+        assert used == {"joint-space"} and words.startswith("joint space (a tree of")
 
 
 def test_shell_completion_offers_commands_options_and_views() -> None:

@@ -70,16 +70,17 @@ def test_a_twisting_link_follows_the_exact_bdf2_recursion():
         angles.append(quat.log(sim.view().body_quat[1]) @ axis)
     inertia = axis @ model.body_inertia[1] @ axis
     expected = twist_recursion(h, steps, theta0, inertia)
-    # measured: 1.75e-12 rad over 100 steps: the step's inertias are about the world origin,
-    # 1.5 m from this link, where its 0.45 kg·m² swamp the 2.2e-5 about its axis (4 digits
-    # of cancellation).  A 1 % change of γ, c or K fails by 1e-4 or more.
-    assert np.abs(np.array(angles) - expected).max() < 5e-12
+    # measured: 1.9e-16 rad over 100 steps (the step's spatial quantities are about the
+    # root's anchor; about the world origin, 1.5 m away, the link's 0.45 kg·m² swamped the
+    # 2.2e-5 about its axis: 1.75e-12).  A 1 % change of γ, c or K fails by 1e-4 or more.
+    assert np.abs(np.array(angles) - expected).max() < 1e-15
     assert expected[-1] < 1e-9 < expected[0] - 0.2  # it turned back (overdamped: D/I = 230/s)
 
 
 def _twin_runs(name: str, h: float, steps: int) -> tuple[list, list]:
-    """(compiled, numpy) states of scene ``name`` after every step: the JointSim's kernel,
-    and the same stepper's arrays stepped by reference_part."""
+    """(compiled, numpy) (positions from the step's origin, orientations, angular
+    velocities) of scene ``name`` after every step: the JointSim's kernel, and the same
+    stepper's arrays stepped by reference_part."""
     sc = likeforlike.scene(name)
     model = sc.model.with_options(h=h, integrator="bdf2")
     inputs = likeforlike.our_inputs(sc, h, steps)
@@ -87,7 +88,8 @@ def _twin_runs(name: str, h: float, steps: int) -> tuple[list, list]:
     runs: tuple[list, list] = ([], [])
     for inp in inputs:
         fast.advance(inp)
-        runs[0].append(fast.state)
+        f, nb = fast._s, model.nbody
+        runs[0].append((f.pos[:nb].copy(), f.quat[:nb].copy(), f.omega[:nb].copy()))
         assert slow._take_input(inp) is True
         parts = joint_space.parts(h, slow._s.clock[CLOCK_HPREV], slow._restart)
         slow._restart = False
@@ -104,13 +106,11 @@ def _twin_runs(name: str, h: float, steps: int) -> tuple[list, list]:
 @pytest.mark.parametrize(("name", "h"), [("doll-pull", 0.005), ("chain-bent", 0.1)])
 def test_the_compiled_step_equals_the_dense_specification(name, h):
     fast, slow = _twin_runs(name, h, 12)
-    err = [max(np.abs(s.body_pos - p).max(), np.abs(s.body_quat - q).max(),
-               np.abs(s.body_omega - w).max() * h)
-           for s, (p, q, w) in zip(fast, slow, strict=True)]  # fmt: skip
-    # measured: the doll pulled 4.7e-16; the chain at 100 ms (three parts a step) 6.8e-12,
-    # its inertias taken 1.5 m away at the world origin (test_a_twisting_link_…)
-    assert max(err) < 2e-11, err
-    moved = np.abs(fast[-1].body_pos - fast[0].body_pos).max()
+    err = [max(np.abs(p - p2).max(), np.abs(q - q2).max(), np.abs(w - w2).max() * h)
+           for (p, q, w), (p2, q2, w2) in zip(fast, slow, strict=True)]  # fmt: skip
+    # measured: the doll pulled 2.3e-16; the chain at 100 ms (three parts a step) 7.5e-14
+    assert max(err) < 3e-13, err
+    moved = np.abs(fast[-1][0] - fast[0][0]).max()
     assert moved > 1e-3  # the scene moves
 
 
