@@ -10,10 +10,13 @@
 ``model.options.engine`` picks the implementation: ``"compiled"`` (the default: the numba
 step of ``solver.compiled``, which hands any step it does not do itself to the numpy
 step) or ``"numpy"`` (``solver.pipeline``, the readable specification of the step).  They
-give the same states to rounding (tests/solver/test_fast.py).  An Engine is the explicit
-per-model context of a run: for the compiled step it holds the packed arrays and
-workspaces (``solver.compiled.pack``) and those of the substep models it meets, so one
-engine serves one thread at a time.
+give the same states to rounding (tests/solver/test_fast.py), with one exception: the
+compiled engine's in-place stepper takes a ``bdf2`` tree of spring-damper joints in joint
+space (solver.advance.joint_space, whose numpy specification is tested against it), a
+different discretisation of the same equations, while the numpy engine steps it with rows.
+An Engine is the explicit per-model context of a run: for the compiled step it holds the
+packed arrays and workspaces (``solver.compiled.pack``) and those of the substep models it
+meets, so one engine serves one thread at a time.
 """
 
 from __future__ import annotations
