@@ -20,12 +20,12 @@ on the joints by Jᵀ (the joints' reactions drop out), is
 
 with u = u* + δu: the joints' springs and dampers K, D (θ[t+1] = θ* + γδu) and a grip's
 spring-damper k, d on the point p of one bone (G = [−[p]×, I], f* its force at the
-predicted pose) at t+1, gravity W = (x × mg, mg).  The new orientations are q[t+1] =
-exp(γω) ⊗ q̂.  The momenta kept for the next step are the solved ones at the predicted
-pose: re-evaluated at the end pose they differ by O(h²) a step, which makes the step
-first order (measured on one link: the error halves, not quarters, with h).  Taking
-BDF2 on u itself instead (a textbook choice) lets a bone's twist leak into its children's
-relative rates: 13× the error on a chain bent in 3-D.
+predicted pose) at t+1, gravity and the step's loads W = (x × (mg + F) + τ, mg + F).
+The new orientations are q[t+1] = exp(γω) ⊗ q̂.  The momenta kept for the next step are
+the solved ones at the predicted pose: re-evaluated at the end pose they differ by O(h²)
+a step, which makes the step first order (measured on one link: the error halves, not
+quarters, with h).  Taking BDF2 on u itself instead (a textbook choice) lets a bone's
+twist leak into its children's relative rates: 13× the error on a chain bent in 3-D.
 
 This module is the specification, solved densely (``reference_part``: numpy, every
 matrix built whole).  The compiled twin (solver.advance.joint_space_kernel) solves the same
@@ -190,7 +190,8 @@ def reference_part(tree: tuple, model: tuple, state: tuple, h: float, r: float,
         ph = P[c, 3:] + c_bdf * (P[c, 3:] - Pp[c, 3:])
         Hh[c] = np.concatenate([Lh + np.cross(x, ph), ph])
         mg = m * opt[layout.OPT_GRAVITY : layout.OPT_GRAVITY + 3]
-        W[c] = np.concatenate([np.cross(x, mg), mg])
+        torque, force = state.loads[c, :3], state.loads[c, 3:]
+        W[c] = np.concatenate([np.cross(x, mg + force) + torque, mg + force])
     u_star = np.concatenate([quat.matrix(Qs[p]).T @ (Om[c] - Om[p])
                              for c, p in zip(child, parent, strict=True)])  # fmt: skip
     rel = [quat.mul(quat.conj(Qs[p]), Qs[c]) for c, p in zip(child, parent, strict=True)]

@@ -50,7 +50,8 @@ class Arrays(NamedTuple):
     world origin they would lose digits on bodies far from it); vel m/s (p/m); rest (n,4):
     each tree joint's elastic rest (parent frame); deflection (nj,3) rad and torque (nj,3)
     N·m per model joint; clock (4,): CLOCK_* below; world_pos m: pos from the world's
-    origin."""
+    origin; loads (nb1,6): the step's input, a torque about the centre (N·m) and a force
+    at it (N) on each body."""
 
     quat: np.ndarray
     quat_prev: np.ndarray
@@ -64,6 +65,7 @@ class Arrays(NamedTuple):
     torque: np.ndarray
     clock: np.ndarray
     world_pos: np.ndarray
+    loads: np.ndarray
 
 
 class Work(NamedTuple):
@@ -87,8 +89,8 @@ class Work(NamedTuple):
 
 
 WIDTHS = (3, 3, 3, 3, 1, 9, 8, 4, 4, 3, 6, 6, 3, 3, 4, 3, 3, 4, 4, 4, 18, 36, 36, 6, 6, 6, 9, 18,
-          3, 9, 3)  # fmt: skip
-ROWS = "nnnnbbobbbbbbbnjjobbnbbbbbnnnnb"
+          3, 9, 3, 6)  # fmt: skip
+ROWS = "nnnnbbobbbbbbbnjjobbnbbbbbnnnnbb"
 """Each float field's width and what counts its rows (n joints of the tree, b bodies and
 the world, j joints of the model, o one), in ``views``' order."""
 OPT_GRAVITY, OPT_MAX_SPEED, OPT_MAX_SPIN, OPT_ORIGIN = 0, 3, 4, 5
@@ -140,7 +142,8 @@ def views(fb, ib):
              _field(fb, off, 10, nb1, 6), _field(fb, off, 11, nb1, 6),
              _field(fb, off, 12, nb1, 3), _field(fb, off, 13, nb1, 3), _field(fb, off, 14, n, 4),
              _field(fb, off, 15, nj, 3), _field(fb, off, 16, nj, 3),
-             _field(fb, off, 17, 1, 4)[0, :], _field(fb, off, 30, nb1, 3))  # fmt: skip
+             _field(fb, off, 17, 1, 4)[0, :], _field(fb, off, 30, nb1, 3),
+             _field(fb, off, 31, nb1, 6))  # fmt: skip
     work = Work(_field(fb, off, 18, nb1, 4), _field(fb, off, 19, nb1, 4),
             _blocks(fb, off, 20, n, 6),
             _blocks(fb, off, 21, nb1, 6), _blocks(fb, off, 22, nb1, 6),
@@ -263,10 +266,12 @@ def _predict(tree, state, work, c_bdf, gam):
 @kernel(error_model="numpy", inline="always")
 def _linearise(tree, model, state, work, c_bdf, gam):
     """At the predicted pose: placements, motion subspaces S, relative rates u*, spring
-    deflections, spatial inertias, V* and each body's residual f = Φ V* − Ĥ − γ·(m g, x×m g)."""
+    deflections, spatial inertias, V* and each body's residual f = Φ V* − Ĥ − γW (W: gravity
+    and the loads, as a wrench at the origin)."""
     child, parent = tree.child, tree.parent
     ap, ac, _, _, mass, ibody, opt = model
-    P, Pp, X, anchor = state.momentum, state.momentum_prev, state.pos, state.rest
+    P, Pp, X, anchor, loads = state.momentum, state.momentum_prev, state.pos, state.rest, \
+        state.loads  # fmt: skip
     Qs, S, I6, V, f, wk = (
         work.quat_pred,
         work.motion,
@@ -316,6 +321,10 @@ def _linearise(tree, model, state, work, c_bdf, gam):
         for i in range(3):
             f[c, i] -= lo[i] + gam * tg[i]
             f[c, 3 + i] -= ph[i] + gam * mg[i]
+        tl = cross(x, (loads[c, 3], loads[c, 4], loads[c, 5]))  # the loads' moment at O
+        for i in range(3):
+            f[c, i] -= gam * (loads[c, i] + tl[i])
+            f[c, 3 + i] -= gam * loads[c, 3 + i]
 
 
 @kernel(error_model="numpy", inline="always")
@@ -487,7 +496,7 @@ def _outputs(tree, model, state, grip):
     deflection and spring-damper torque, the grip's force on its bone."""
     child, parent, joint = tree.child, tree.parent, tree.joint
     kf, df, mass = model.kf, model.df, model.mass
-    Q, _, Om, P, _, X, Vl, anchor, delta, torque, clock, world = state
+    Q, _, Om, P, _, X, Vl, anchor, delta, torque, clock, world, _ = state
     origin = model.options[OPT_ORIGIN : OPT_ORIGIN + 3]
     for k in range(len(child)):
         c, p, j = child[k], parent[k], joint[k]

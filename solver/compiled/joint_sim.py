@@ -2,9 +2,9 @@
 
 ``solver.Engine.stepper`` returns a ``JointSim`` instead of a ``Sim`` when the model
 qualifies (solver.advance.joint_space.unsupported); callers cannot tell but by the
-report's ``solver`` ("joint-space") and the speed.  A step's input it cannot take (loads,
-pins, a pointer touching the bones, a grip with rotation rows or force limits) hands the
-run over to the maximal-coordinate ``Sim`` for good: from that step on, every step is that
+report's ``solver`` ("joint-space") and the speed.  A step's input it cannot take (pins,
+a pointer touching the bones, a grip with rotation rows or force limits) hands the run
+over to the maximal-coordinate ``Sim`` for good: from that step on, every step is that
 stepper's (its BDF2 restarts there, as after any change of input).
 
 The state it shows is the bodies' (pose, velocities: v = p/m), each joint's deflection
@@ -90,7 +90,7 @@ class JointSim:
         """Make ``state`` the current state (copied); the next step restarts BDF2."""
         self._taken = None
         nb, moving = self._nb, self.model.body_inv_mass > 0.0
-        Q, Qp, Om, P, Pp, X, Vl, anchor, delta, torque, clock, world = self._s
+        Q, Qp, Om, P, Pp, X, Vl, anchor, delta, torque, clock, world, _ = self._s
         if state.body_pos.shape != (nb, 3) or state.joint_anchor.shape != (self.model.njoint, 4):
             raise ValueError(f"JointSim.load: not a state of this model ({nb} bodies)")
         Q[:nb], Q[nb] = state.body_quat, quat.IDENTITY
@@ -111,6 +111,8 @@ class JointSim:
         self._time, self._steps = float(state.time), int(state.step)
         self._coupling, self._restart, self._parts = None, True, np.zeros((1, 2))
         self._settled, self._made, self._coasting = False, True, False
+        self._loaded = False
+        self._s.loads[:] = 0.0
 
     @property
     def state(self) -> State:
@@ -168,7 +170,7 @@ class JointSim:
             self._parts = joint_space.parts(self._h, self._s.clock[CLOCK_HPREV], self._restart)
             self._restart = False
             self._settled = self._parts[-1, 0] == self._steady[-1, 0]  # next: steady parts
-        self._coasting = self._settled and self._coupling is None
+        self._coasting = self._settled and self._coupling is None and not self._loaded
         if advance(self._fb, self._ib, self._parts, self._grip) != OK:
             self._raise_broken()
 
@@ -181,18 +183,19 @@ class JointSim:
         return self._steps if self._taken is None else self._taken.steps
 
     def _take_input(self, inp: StepInput | None) -> bool:
-        """Write the step's grip into the grip vector; False when the input needs the
-        maximal-coordinate step.  A grip begun, ended or changed restarts BDF2."""
+        """Write the step's grip and loads into the buffers; False when the input needs the
+        maximal-coordinate step.  A grip or loads begun, ended or changed restart BDF2."""
         g = self._grip
         c = None if inp is None else inp.coupling
         if inp is not None and (
-            inp.body_force is not None or inp.body_torque is not None or inp.pins
-            or (inp.pointer is not None and c is None and inp.pointer.radius > 0.0)
+            inp.pins or (inp.pointer is not None and c is None and inp.pointer.radius > 0.0)
         ):  # fmt: skip
             return False
+        limited = c is not None and not (c.position_only and math.isinf(c.force_limit))
+        if c is not self._coupling and limited:
+            return False  # rotation rows or a force limit
+        self._take_loads(inp)
         if c is not self._coupling:
-            if c is not None and not (c.position_only and math.isinf(c.force_limit)):
-                return False  # rotation rows or a force limit
             self._restart |= not _same_spring(c, self._coupling)
             self._coupling = c
             g[GRIP_BODY] = -1.0 if c is None else c.body
@@ -209,6 +212,26 @@ class JointSim:
                 g[GRIP_TARGET : GRIP_TARGET + 3] += lever
                 g[GRIP_RATE : GRIP_RATE + 3] += quat.cross(ptr.omega, lever)
         return True
+
+    def _take_loads(self, inp: StepInput | None) -> None:
+        """The step's loads (torque about each body's centre, force at it) into the
+        buffer; restarts BDF2 when they differ from the last step's."""
+        nb, loads = self._nb, self._s.loads
+        force = None if inp is None else inp.body_force
+        torque = None if inp is None else inp.body_torque
+        if force is None and torque is None:
+            if self._loaded:
+                loads[:] = 0.0
+                self._loaded, self._restart = False, True
+            return
+        new = np.zeros((nb, 6))
+        if torque is not None:
+            new[:, :3] = torque
+        if force is not None:
+            new[:, 3:] = force
+        if not (self._loaded and np.array_equal(new, loads[:nb])):
+            loads[:nb] = new
+            self._loaded, self._restart = True, True
 
     def _raise_broken(self) -> None:
         self._fresh()
