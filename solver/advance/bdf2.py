@@ -115,7 +115,8 @@ def stage_length(h: float, r: float) -> float:
     return h * (1.0 + r) / (1.0 + 2.0 * r)
 
 
-def _momentum(model: Model, q: np.ndarray, omega: np.ndarray) -> np.ndarray:
+def angular_momentum(model: Model, q: np.ndarray, omega: np.ndarray) -> np.ndarray:
+    """Each body's angular momentum about its centre, I_w ω (N·m·s, world), at orientations q."""
     rot = quat.matrix(q)
     inertia_w = rot @ model.body_inertia @ np.swapaxes(rot, 1, 2)
     return np.einsum("nij,nj->ni", inertia_w, omega)
@@ -137,8 +138,8 @@ def predict(model: Model, state: State, r: float) -> Prediction:
     turn = quat.log(quat.mul(state.body_quat, quat.conj(p_quat)))
     q_hat = quat.normalize(quat.mul(quat.exp(c * turn), state.body_quat))
     vel_hat = state.body_vel + c * (state.body_vel - p_vel)
-    mom = _momentum(model, state.body_quat, state.body_omega)
-    mom_hat = mom + c * (mom - _momentum(model, p_quat, p_omega))
+    mom = angular_momentum(model, state.body_quat, state.body_omega)
+    mom_hat = mom + c * (mom - angular_momentum(model, p_quat, p_omega))
     v_tilde, w_tilde = state.body_vel, state.body_omega
     pos = pos_hat + gamma * v_tilde
     q = quat.normalize(quat.mul(quat.exp(gamma * w_tilde), q_hat))
@@ -203,7 +204,7 @@ def integrate_stage(
     pos = pred.pos + g * vel[:, :3]
     q = quat.normalize(quat.mul(quat.exp(g * vel[:, 3:]), pred.quat))
     true = vel + pred.shift
-    mom = _momentum(model, pred.quat, true[:, 3:])
+    mom = angular_momentum(model, pred.quat, true[:, 3:])
     rot = quat.matrix(q)
     inv_w = rot @ model.body_inv_inertia @ np.swapaxes(rot, 1, 2)
     return pos, q, true, np.einsum("nij,nj->ni", inv_w, mom)

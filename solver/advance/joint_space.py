@@ -45,9 +45,11 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg import block_diag
 
 from solver import quat
 from solver.advance import joint_space_kernel as layout
+from solver.advance.bdf2 import stage_length
 from solver.advance.bdf2_kernel import R_MAX, RESTART
 from solver.model import Model
 
@@ -171,7 +173,7 @@ def reference_part(tree: tuple, model: tuple, state: tuple, h: float, r: float,
     Q, Qp, Om, P, Pp, X = state.quat, state.quat_prev, state.omega, state.momentum, \
         state.momentum_prev, state.pos  # fmt: skip
     anchor = state.rest
-    c_bdf, gam = r * r / (1.0 + 2.0 * r), h * (1.0 + r) / (1.0 + 2.0 * r)
+    c_bdf, gam = r * r / (1.0 + 2.0 * r), stage_length(h, r)
     Qh, Qs = Q.copy(), Q.copy()
     for c in child:
         Qh[c] = quat.mul(quat.exp(c_bdf * quat.log(quat.mul(Q[c], quat.conj(Qp[c])))), Q[c])
@@ -199,7 +201,7 @@ def reference_part(tree: tuple, model: tuple, state: tuple, h: float, r: float,
         [quat.log(quat.mul(q, quat.conj(a))) for q, a in zip(rel, anchor, strict=True)]
     )
     K, D = kf.ravel(), df.ravel()
-    Phi_all = _block_diagonal(Phi)
+    Phi_all = block_diag(*Phi)
     V_star = J @ u_star
     A = J.T @ Phi_all @ J + np.diag(gam * (D + gam * K))
     b = gam * (-K * theta - D * u_star) - J.T @ (Phi_all @ V_star - Hh.ravel() - gam * W.ravel())
@@ -246,10 +248,3 @@ def _jacobian(tree: tuple, ap: np.ndarray, Qs: np.ndarray, Xs: np.ndarray) -> np
             if walk == c:
                 J[6 * b : 6 * b + 6, 3 * k : 3 * k + 3] = S
     return J
-
-
-def _block_diagonal(blocks: np.ndarray) -> np.ndarray:
-    out = np.zeros((6 * len(blocks), 6 * len(blocks)))
-    for i, blk in enumerate(blocks):
-        out[6 * i : 6 * i + 6, 6 * i : 6 * i + 6] = blk
-    return out

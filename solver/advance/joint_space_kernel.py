@@ -16,7 +16,20 @@ from numba import carray
 
 from solver.compiled.flat import row_pointer
 from solver.jit import kernel
-from solver.kin_kernel import add, cross, qconj, qexp, qlog, qmul, qnormalize, scale
+from solver.kin_kernel import (
+    add,
+    cross,
+    qconj,
+    qexp,
+    qlog,
+    qmul,
+    qnormalize,
+    qrotate,
+    quat_at,
+    scale,
+    vec,
+    vec_from,
+)
 
 
 class Tree(NamedTuple):
@@ -186,21 +199,12 @@ def rotm(q):
 
 @kernel(error_model="numpy", inline="always")
 def _rot(R, v):
+    """R v for a rotation matrix of nested tuples (``rotm``), when R is made anyway."""
     return (
         R[0][0] * v[0] + R[0][1] * v[1] + R[0][2] * v[2],
         R[1][0] * v[0] + R[1][1] * v[1] + R[1][2] * v[2],
         R[2][0] * v[0] + R[2][1] * v[1] + R[2][2] * v[2],
     )
-
-
-@kernel(error_model="numpy", inline="always")
-def _q(a, i):
-    return (a[i, 0], a[i, 1], a[i, 2], a[i, 3])
-
-
-@kernel(error_model="numpy", inline="always")
-def _v(a, i, k):
-    return (a[i, k], a[i, k + 1], a[i, k + 2])
 
 
 @kernel(error_model="numpy", inline="always")
@@ -217,6 +221,30 @@ def _udinv(U, Dinv, k, i, col):
 
 
 @kernel(error_model="numpy", inline="always")
+def _joint_motion(Q, Om, rest, k, c, p, Rp):
+    """Joint k's rate Rpᵀ(ω_c − ω_p) and deflection log(q_p⁻¹ q_c ⊗ rest⁻¹) (parent frame;
+    Rp: the parent's rotation matrix, ``rotm``)."""
+    dw = (Om[c, 0] - Om[p, 0], Om[c, 1] - Om[p, 1], Om[c, 2] - Om[p, 2])
+    rate = (Rp[0][0] * dw[0] + Rp[1][0] * dw[1] + Rp[2][0] * dw[2],
+            Rp[0][1] * dw[0] + Rp[1][1] * dw[1] + Rp[2][1] * dw[2],
+            Rp[0][2] * dw[0] + Rp[1][2] * dw[1] + Rp[2][2] * dw[2])  # fmt: skip
+    rel = qmul(qmul(qconj(quat_at(Q, p)), quat_at(Q, c)), qconj(quat_at(rest, k)))
+    return rate, qlog(rel)
+
+
+@kernel(error_model="numpy", inline="always")
+def _grip_force(grip, point, rate, tail):
+    """The grip spring-damper's force on its point (position, velocity), the target taken
+    ``tail`` before the step's end (back along its velocity)."""
+    k, d, t, v = grip[GRIP_K], grip[GRIP_D], GRIP_TARGET, GRIP_RATE
+    return (
+        -k * (point[0] - grip[t] + tail * grip[v]) - d * (rate[0] - grip[v]),
+        -k * (point[1] - grip[t + 1] + tail * grip[v + 1]) - d * (rate[1] - grip[v + 1]),
+        -k * (point[2] - grip[t + 2] + tail * grip[v + 2]) - d * (rate[2] - grip[v + 2]),
+    )
+
+
+@kernel(error_model="numpy", inline="always")
 def place(tree, model, Q, X):
     """Each tree joint's child placed by the joint: X[child] = anchor − R_c·anchor_child,
     the anchor on the parent at X[parent] + R_p·anchor_parent."""
@@ -224,8 +252,8 @@ def place(tree, model, Q, X):
     ap, ac = model.anchor_parent, model.anchor_child
     for k in range(len(child)):
         c, p = child[k], parent[k]
-        a = add(_v(X, p, 0), _rot(rotm(_q(Q, p)), _v(ap, k, 0)))
-        lever = _rot(rotm(_q(Q, c)), _v(ac, k, 0))
+        a = add(vec(X, p), qrotate(quat_at(Q, p), vec(ap, k)))
+        lever = qrotate(quat_at(Q, c), vec(ac, k))
         for i in range(3):
             X[c, i] = a[i] - lever[i]
 
@@ -255,9 +283,9 @@ def _predict(tree, state, work, c_bdf, gam):
     Q, Qp, Om = state.quat, state.quat_prev, state.omega
     Qh, Qs = work.quat_hat, work.quat_pred
     for c in tree.child:
-        qc = _q(Q, c)
-        qh = qmul(qexp(scale(c_bdf, qlog(qmul(qc, qconj(_q(Qp, c)))))), qc)
-        qs = qnormalize(qmul(qexp(scale(gam, _v(Om, c, 0))), qh))
+        qc = quat_at(Q, c)
+        qh = qmul(qexp(scale(c_bdf, qlog(qmul(qc, qconj(quat_at(Qp, c)))))), qc)
+        qs = qnormalize(qmul(qexp(scale(gam, vec(Om, c))), qh))
         for i in range(4):
             Qh[c, i] = qh[i]
             Qs[c, i] = qs[i]
@@ -284,9 +312,9 @@ def _linearise(tree, model, state, work, c_bdf, gam):
     g = (opt[OPT_GRAVITY], opt[OPT_GRAVITY + 1], opt[OPT_GRAVITY + 2])
     for k in range(len(child)):
         c, p = child[k], parent[k]
-        Rp, Rc = rotm(_q(Qs, p)), rotm(_q(Qs, c))
-        a = add(_v(X, p, 0), _rot(Rp, _v(ap, k, 0)))
-        lever = _rot(Rc, _v(ac, k, 0))
+        Rp, Rc = rotm(quat_at(Qs, p)), rotm(quat_at(Qs, c))
+        a = add(vec(X, p), _rot(Rp, vec(ap, k)))
+        lever = _rot(Rc, vec(ac, k))
         x = (a[0] - lever[0], a[1] - lever[1], a[2] - lever[2])
         for i in range(3):
             X[c, i] = x[i]
@@ -296,11 +324,9 @@ def _linearise(tree, model, state, work, c_bdf, gam):
             for i in range(3):
                 S[k, i, col] = e[i]
                 S[k, 3 + i, col] = lin[i]
-        dw = (Om[c, 0] - Om[p, 0], Om[c, 1] - Om[p, 1], Om[c, 2] - Om[p, 2])
-        rel = qmul(qmul(qconj(_q(Qs, p)), _q(Qs, c)), qconj(_q(anchor, k)))
-        th = qlog(rel)
+        rate, th = _joint_motion(Qs, Om, anchor, k, c, p, Rp)
         for i in range(3):
-            wk[k, i] = Rp[0][i] * dw[0] + Rp[1][i] * dw[1] + Rp[2][i] * dw[2]
+            wk[k, i] = rate[i]
             wk[k, 3 + i] = th[i]
         m = mass[c]
         spatial_inertia(Rc, ibody[c], m, x, I6[c])
@@ -337,16 +363,10 @@ def _grip(state, work, grip, tail, gam):
     if b < 0:
         return
     Qs, X, V, f, IA = work.quat_pred, state.pos, work.velocity, work.residual, work.articulated
-    a = GRIP_ANCHOR
-    p = add(_v(X, b, 0), _rot(rotm(_q(Qs, b)), (grip[a], grip[a + 1], grip[a + 2])))
+    p = add(vec(X, b), qrotate(quat_at(Qs, b), vec_from(grip, GRIP_ANCHOR)))
+    pd = add(vec_from(V[b], 3), cross(vec(V, b), p))
+    fg = _grip_force(grip, p, pd, tail)
     k, d = grip[GRIP_K], grip[GRIP_D]
-    pd = add((V[b, 3], V[b, 4], V[b, 5]), cross((V[b, 0], V[b, 1], V[b, 2]), p))
-    t, v = GRIP_TARGET, GRIP_RATE
-    fg = (
-        -k * (p[0] - grip[t] + tail * grip[v]) - d * (pd[0] - grip[v]),
-        -k * (p[1] - grip[t + 1] + tail * grip[v + 1]) - d * (pd[1] - grip[v + 1]),
-        -k * (p[2] - grip[t + 2] + tail * grip[v + 2]) - d * (pd[2] - grip[v + 2]),
-    )
     mo = cross(p, fg)
     for i in range(3):
         f[b, i] -= gam * mo[i]
@@ -448,9 +468,9 @@ def _finish(tree, model, state, work, gam):
         c, p = child[k], parent[k]
         for i in range(6):
             pA[c, i] = pA[p, i] + _mul3(S, k, i, wk[k, 6], wk[k, 7], wk[k, 8])
-        wc = _v(pA, c, 0)
-        x = _v(X, c, 0)
-        vc = add(_v(pA, c, 3), cross(wc, x))
+        wc = vec(pA, c)
+        x = vec(X, c)
+        vc = add(vec_from(pA[c], 3), cross(wc, x))
         for i in range(3):
             Pp[c, i], Pp[c, 3 + i] = P[c, i], P[c, 3 + i]
             s = 0.0
@@ -459,10 +479,10 @@ def _finish(tree, model, state, work, gam):
             P[c, i] = s
             P[c, 3 + i] = mass[c] * vc[i]
             Om[c, i] = wc[i]
-        about_centre = cross(x, _v(P, c, 3))
+        about_centre = cross(x, vec_from(P[c], 3))
         for i in range(3):
             P[c, i] -= about_centre[i]
-        qn = qnormalize(qmul(qexp(scale(gam, wc)), _q(Qh, c)))
+        qn = qnormalize(qmul(qexp(scale(gam, wc)), quat_at(Qh, c)))
         for i in range(4):
             Qp[c, i] = Q[c, i]
             Q[c, i] = qn[i]
@@ -471,22 +491,21 @@ def _finish(tree, model, state, work, gam):
 @kernel(error_model="numpy", inline="always")
 def part(tree, model, state, work, h, r, grip, tail):
     """One BDF2 part of length h at step ratio r = h/h_prev (r = 0: backward Euler, no
-    history); tail: the time from its end to the whole step's end (the grip's target)."""
+    history); tail: the time from its end to the whole step's end (the grip's target).
+    The bodies' positions are left at the predicted pose (``advance`` places them at the
+    step's end)."""
     c_bdf = r * r / (1.0 + 2.0 * r)
     gam = h * (1.0 + r) / (1.0 + 2.0 * r)
-    I6, IA, pA, V, f = work.inertia, work.articulated, work.bias, work.velocity, work.residual
-    for b in range(V.shape[0]):
-        for i in range(6):
-            V[b, i] = pA[b, i] = f[b, i] = 0.0
+    work.velocity[:] = 0.0  # the fixed bodies' stay 0
+    work.bias[:] = 0.0
+    work.residual[:] = 0.0
     _predict(tree, state, work, c_bdf, gam)
     _linearise(tree, model, state, work, c_bdf, gam)
-    IA[:] = I6
+    work.articulated[:] = work.inertia
     _grip(state, work, grip, tail, gam)
     _articulate(tree, model, work, gam)
-    V[:] = 0.0
-    pA[:] = 0.0
+    work.bias[:] = 0.0  # (the fixed bodies' took their children's)
     _finish(tree, model, state, work, gam)
-    place(tree, model, state.quat, state.pos)
     state.clock[CLOCK_HPREV] = h
 
 
@@ -503,26 +522,18 @@ def _outputs(tree, model, state, grip):
         for i in range(3):
             Vl[c, i] = P[c, 3 + i] / mass[c]
             world[c, i] = X[c, i] + origin[i]
-        Rp = rotm(_q(Q, p))
-        dw = (Om[c, 0] - Om[p, 0], Om[c, 1] - Om[p, 1], Om[c, 2] - Om[p, 2])
-        th = qlog(qmul(qmul(qconj(_q(Q, p)), _q(Q, c)), qconj(_q(anchor, k))))
+        rate, th = _joint_motion(Q, Om, anchor, k, c, p, rotm(quat_at(Q, p)))
         for i in range(3):
             delta[j, i] = th[i]
-            rate = Rp[0][i] * dw[0] + Rp[1][i] * dw[1] + Rp[2][i] * dw[2]
-            torque[j, i] = -kf[k, i] * th[i] - df[k, i] * rate
+            torque[j, i] = -kf[k, i] * th[i] - df[k, i] * rate[i]
     b = int(grip[GRIP_BODY])
-    for i in range(3):
-        clock[CLOCK_GRIP_FORCE + i] = 0.0
+    force = (0.0, 0.0, 0.0)
     if b >= 0:
-        w = _v(Om, b, 0)
-        a = GRIP_ANCHOR
-        lever = _rot(rotm(_q(Q, b)), (grip[a], grip[a + 1], grip[a + 2]))
-        v = add(_v(Vl, b, 0), cross(w, lever))
-        for i in range(3):
-            p = X[b, i] + lever[i]
-            clock[CLOCK_GRIP_FORCE + i] = -grip[GRIP_K] * (p - grip[GRIP_TARGET + i]) - grip[
-                GRIP_D
-            ] * (v[i] - grip[GRIP_RATE + i])
+        lever = qrotate(quat_at(Q, b), vec_from(grip, GRIP_ANCHOR))
+        rate = add(vec(Vl, b), cross(vec(Om, b), lever))
+        force = _grip_force(grip, add(vec(X, b), lever), rate, 0.0)
+    for i in range(3):
+        clock[CLOCK_GRIP_FORCE + i] = force[i]
 
 
 @kernel(error_model="numpy", inline="always")
@@ -556,6 +567,7 @@ def advance(fb, ib, parts, grip):
     for i in range(parts.shape[0]):
         done += parts[i, 0]
         part(tree, model, state, work, parts[i, 0], parts[i, 1], grip, total - done)
+    place(tree, model, state.quat, state.pos)  # a part's linearisation places its own pose
     return OK if _broken(tree, model, state) < 0 else BROKEN
 
 

@@ -22,6 +22,7 @@ import numpy as np
 
 from solver import quat
 from solver.advance import joint_space
+from solver.advance.bdf2 import angular_momentum
 from solver.advance.joint_space_kernel import (
     CLOCK_GRIP_FORCE,
     CLOCK_HPREV,
@@ -98,13 +99,11 @@ class JointSim:
         world[:nb], world[nb] = state.body_pos, 0.0
         Om[:nb], Om[nb] = np.where(moving[:, None], state.body_omega, 0.0), 0.0
         Vl[:nb], Vl[nb] = np.where(moving[:, None], state.body_vel, 0.0), 0.0
-        for b in range(nb):
-            R = quat.matrix(Q[b])
-            P[b, :3] = R @ self.model.body_inertia[b] @ R.T @ Om[b]
-            P[b, 3:] = self.model.body_mass[b] * Vl[b]
+        P[:nb, :3] = angular_momentum(self.model, Q[:nb], Om[:nb])
+        P[:nb, 3:] = self.model.body_mass[:, None] * Vl[:nb]
         Qp[:], Pp[:] = Q, P
         self._w.quat_hat[:], self._w.quat_pred[:] = Q, Q  # fixed bodies' q̂ and q̃ are their pose
-        anchor[:] = state.joint_anchor[self._tree[2]]
+        anchor[:] = state.joint_anchor[self._tree.joint]
         delta[:], torque[:] = state.joint_q_sf, state.joint_torque
         clock[:] = 0.0
         self._kept = state  # the fields this stepper does not change
